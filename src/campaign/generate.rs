@@ -1,0 +1,463 @@
+//! A simulated measurement campaign: targets in each region, inverse kinematics on the nominal model (what
+//! the controller does), feasibility, then the true robot reaching each command and the tracker measuring it.
+//!
+//! Every candidate point draws from its own generator, derived from (seed, region, attempt, index), so the
+//! work runs in parallel and the result is the same whatever the thread count.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Point3};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::region::{CampaignConfig, RegionConfig};
+use crate::error::{Error, Result};
+use crate::rng::{Stream, derive};
+use crate::robot::Chain;
+use crate::robot::collision::CollisionModel;
+use crate::robot::ik::{IkError, IkOptions, IkSolver};
+use crate::robot::kinematics::{Frames, forward_kinematics};
+use crate::tracker::Tracker;
+use crate::tracker::reflector::Mounting;
+use crate::truth::physics::SettleOptions;
+use crate::truth::{DeflectionSolver, TrueRobot, TrueState};
+
+/// The last millimetres of a beam lie inside the reflector's own mount, which must not count as blocking.
+const BEAM_END_CLEARANCE_M: f64 = 0.005;
+/// Retries with more candidates when too few are feasible; the candidate count never exceeds this multiple.
+const MAX_ATTEMPTS: u64 = 5;
+const MAX_CANDIDATE_FACTOR: usize = 50;
+
+/// Everything the campaign needs, built once.
+pub struct Setup<'a> {
+    pub nominal: &'a Chain,
+    pub robot: &'a TrueRobot,
+    pub tracker: &'a Tracker,
+    pub mounting: &'a Mounting,
+    pub config: &'a CampaignConfig,
+    pub deflection: DeflectionSolver,
+    pub seed: u64,
+}
+
+/// One measured point, with what the simulation knows about it.
+#[derive(Clone, Debug)]
+pub struct CampaignPoint {
+    pub id: usize,
+    pub region: String,
+    /// Commanded joint angles (rad).
+    pub q_cmd: Vec<f64>,
+    /// The controller's flange pose for the command (nominal kinematics), base frame.
+    pub nominal_flange: Isometry3<f64>,
+    /// Reflectors from nominal kinematics and nominal mounting, base frame.
+    pub nominal_reflectors: Vec<Point3<f64>>,
+    /// Tracker measurements of each reflector, in the tracker's frame.
+    pub measured: Vec<Point3<f64>>,
+    /// The pose the true arm reached for this measurement (repeatability noise included), base frame.
+    pub true_flange: Isometry3<f64>,
+    pub true_reflectors: Vec<Point3<f64>>,
+    /// Link-side joint angles of the true arm (deflected, with noise).
+    pub q_true: Vec<f64>,
+}
+
+/// Why a candidate target did not become a measured point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reason {
+    OutOfReach,
+    JointLimits,
+    SelfCollision,
+    EnvironmentCollision,
+    LineOfSight,
+    AcceptanceCone,
+}
+
+/// Candidate counts of one region, by outcome.
+#[derive(Clone, Debug, Default, Serialize, PartialEq, Eq)]
+pub struct Rejections {
+    pub candidates: usize,
+    pub feasible: usize,
+    pub used: usize,
+    pub out_of_reach: usize,
+    pub joint_limits: usize,
+    pub self_collision: usize,
+    pub environment_collision: usize,
+    pub line_of_sight: usize,
+    pub acceptance_cone: usize,
+}
+
+impl Rejections {
+    fn count(&mut self, reason: Reason) {
+        let slot = match reason {
+            Reason::OutOfReach => &mut self.out_of_reach,
+            Reason::JointLimits => &mut self.joint_limits,
+            Reason::SelfCollision => &mut self.self_collision,
+            Reason::EnvironmentCollision => &mut self.environment_collision,
+            Reason::LineOfSight => &mut self.line_of_sight,
+            Reason::AcceptanceCone => &mut self.acceptance_cone,
+        };
+        *slot += 1;
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} out of reach, {} at joint limits, {} in self-collision, {} hitting an obstacle, \
+             {} with the beam blocked, {} outside the reflector's acceptance cone",
+            self.out_of_reach,
+            self.joint_limits,
+            self.self_collision,
+            self.environment_collision,
+            self.line_of_sight,
+            self.acceptance_cone
+        )
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Campaign {
+    pub joint_names: Vec<String>,
+    pub points: Vec<CampaignPoint>,
+    /// Per region, in scenario order.
+    pub rejections: BTreeMap<String, Rejections>,
+}
+
+/// A command the controller would send: the first half of a candidate's life.
+struct Planned {
+    q_cmd: Vec<f64>,
+    nominal_flange: Isometry3<f64>,
+}
+
+/// Per-thread workspaces.
+struct Work {
+    ik: IkSolver,
+    frames: Frames,
+    state: TrueState,
+}
+
+impl Setup<'_> {
+    /// Generates the campaign over all regions; points are numbered from 0 in region order.
+    pub fn run(&self, regions: &[RegionConfig]) -> Result<Campaign> {
+        let collision = CollisionModel::new(self.nominal);
+        let mut points = Vec::new();
+        let mut rejections = BTreeMap::new();
+        for (r, region) in regions.iter().enumerate() {
+            let (mut region_points, counts) = self.region(r as u64, region, &collision)?;
+            for p in &mut region_points {
+                p.id = points.len();
+                points.push(p.clone());
+            }
+            rejections.insert(region.name.clone(), counts);
+        }
+        Ok(Campaign {
+            joint_names: self.nominal.joint_names(),
+            points,
+            rejections,
+        })
+    }
+
+    fn region(
+        &self,
+        r: u64,
+        region: &RegionConfig,
+        collision: &CollisionModel,
+    ) -> Result<(Vec<CampaignPoint>, Rejections)> {
+        let anchor = self.anchor(region)?;
+        let want = region.points;
+        let mut candidates = want;
+        let mut last = Rejections::default();
+        for attempt in 0..MAX_ATTEMPTS {
+            let layout = region.distribution.build();
+            let unit = layout.sample(
+                candidates,
+                region.size_m,
+                &mut derive(self.seed, Stream::Layout, &[r, attempt]),
+            );
+            let (mut accepted, counts) =
+                self.candidates(r, attempt, region, &anchor, &unit, collision)?;
+            last = counts;
+            if accepted.len() >= want {
+                let k = accepted.len();
+                // Thin evenly in layout order, so a grid stays a grid and a low-discrepancy set stays spread.
+                let keep: Vec<usize> = (0..want).map(|i| i * k / want).collect();
+                let mut kept = Vec::with_capacity(want);
+                for (i, p) in accepted.drain(..).enumerate() {
+                    if keep.binary_search(&i).is_ok() {
+                        kept.push(p);
+                    }
+                }
+                last.used = kept.len();
+                return Ok((kept, last));
+            }
+            let rate = accepted.len() as f64 / unit.len().max(1) as f64;
+            if accepted.is_empty() && unit.len() >= 4 * want {
+                break;
+            }
+            let next = (want as f64 / rate.max(0.02) * 1.25).ceil() as usize;
+            candidates = next.max(2 * unit.len()).min(MAX_CANDIDATE_FACTOR * want);
+            if unit.len() >= MAX_CANDIDATE_FACTOR * want {
+                break;
+            }
+        }
+        let what = if last.feasible == 0 {
+            "no point is feasible"
+        } else {
+            "too few points are feasible"
+        };
+        Err(Error::Unreachable(format!(
+            "region '{}': {what} ({} of {} wanted, from {} candidates: {})",
+            region.name,
+            last.feasible,
+            want,
+            last.candidates,
+            last.describe()
+        )))
+    }
+
+    fn candidates(
+        &self,
+        r: u64,
+        attempt: u64,
+        region: &RegionConfig,
+        anchor: &[f64],
+        unit: &[[f64; 3]],
+        collision: &CollisionModel,
+    ) -> Result<(Vec<CampaignPoint>, Rejections)> {
+        let init = || Work {
+            ik: IkSolver::new(self.nominal, self.ik_options()),
+            frames: Frames::new(self.nominal),
+            state: TrueState::new(self.robot),
+        };
+        let planned: Vec<std::result::Result<Planned, Reason>> = unit
+            .par_iter()
+            .enumerate()
+            .map_init(init, |work, (i, u)| {
+                self.plan(r, attempt, i as u64, region, anchor, u, collision, work)
+            })
+            .collect();
+
+        // The static deflection of every planned command: fixed point in parallel, or the rapier reference.
+        let unloaded: Vec<Option<Vec<f64>>> = planned
+            .par_iter()
+            .map_init(
+                || TrueState::new(self.robot),
+                |state, p| {
+                    p.as_ref().ok().map(|p| {
+                        self.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
+                        state.q0.clone()
+                    })
+                },
+            )
+            .collect();
+        let deflected = self.deflect_all(&unloaded)?;
+
+        let outcomes: Vec<std::result::Result<CampaignPoint, Reason>> = planned
+            .into_par_iter()
+            .zip(deflected.into_par_iter())
+            .enumerate()
+            .map_init(init, |work, (i, (plan, q_link))| {
+                let plan = plan?;
+                let q_link = q_link.expect("a planned command always has a deflection");
+                self.measure(r, attempt, i as u64, region, plan, &q_link, collision, work)
+            })
+            .collect();
+
+        let mut counts = Rejections {
+            candidates: unit.len(),
+            ..Rejections::default()
+        };
+        let mut accepted = Vec::new();
+        for outcome in outcomes {
+            match outcome {
+                Ok(p) => accepted.push(p),
+                Err(reason) => counts.count(reason),
+            }
+        }
+        counts.feasible = accepted.len();
+        Ok((accepted, counts))
+    }
+
+    /// No random restarts: a restart may land on another branch (elbow, wrist flip), and a campaign that
+    /// mixes branches is not what the scenario asked for. A target the solver cannot reach from the
+    /// region's anchor counts as out of reach.
+    fn ik_options(&self) -> IkOptions {
+        IkOptions {
+            limit_margin: self.config.limit_margin_deg.to_radians(),
+            restarts: 0,
+            ..IkOptions::default()
+        }
+    }
+
+    /// The region's anchor: its centre at the nominal tool orientation, solved from the configured posture.
+    /// Every target of the region starts from it and is drawn toward it in the null space, so the whole
+    /// region stays on the branch the posture chose.
+    fn anchor(&self, region: &RegionConfig) -> Result<Vec<f64>> {
+        let posture: Vec<f64> = self
+            .config
+            .posture_deg
+            .iter()
+            .map(|d| d.to_radians())
+            .collect();
+        let centre = Isometry3::from_parts(
+            Point3::from(region.center_m).coords.into(),
+            region.nominal_rotation(),
+        );
+        let mut solver = IkSolver::new(
+            self.nominal,
+            IkOptions {
+                restarts: 0,
+                ..self.ik_options()
+            },
+        );
+        let mut rng = derive(self.seed, Stream::Target, &[u64::MAX]);
+        solver
+            .solve(self.nominal, &centre, &Isometry3::identity(), &posture, Some(&posture), &mut rng)
+            .map(|s| s.q)
+            .map_err(|e| {
+                Error::Unreachable(format!(
+                    "region '{}': its centre at the nominal tool orientation cannot be reached from \
+                     campaign.posture_deg ({e})",
+                    region.name
+                ))
+            })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn plan(
+        &self,
+        r: u64,
+        attempt: u64,
+        i: u64,
+        region: &RegionConfig,
+        anchor: &[f64],
+        unit: &[f64; 3],
+        collision: &CollisionModel,
+        work: &mut Work,
+    ) -> std::result::Result<Planned, Reason> {
+        use rand::Rng;
+        let mut rng = derive(self.seed, Stream::Target, &[r, attempt, i]);
+        let target = region.target(unit, &mut rng);
+        let spread = self.config.posture_spread_deg.to_radians();
+        let pull: Vec<f64> = anchor
+            .iter()
+            .map(|p| {
+                p + if spread > 0.0 {
+                    rng.random_range(-spread..=spread)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let solution = work
+            .ik
+            .solve(
+                self.nominal,
+                &target,
+                &Isometry3::identity(),
+                anchor,
+                Some(&pull),
+                &mut rng,
+            )
+            .map_err(|e| match e {
+                IkError::NotConverged { .. } => Reason::OutOfReach,
+                IkError::JointLimits => Reason::JointLimits,
+            })?;
+        forward_kinematics(self.nominal, &solution.q, &mut work.frames);
+        if collision.self_collision(&work.frames).is_some() {
+            return Err(Reason::SelfCollision);
+        }
+        if self
+            .config
+            .obstacles
+            .iter()
+            .any(|o| collision.hits_obstacle(&work.frames, o).is_some())
+        {
+            return Err(Reason::EnvironmentCollision);
+        }
+        Ok(Planned {
+            nominal_flange: work.frames.flange,
+            q_cmd: solution.q,
+        })
+    }
+
+    fn deflect_all(&self, unloaded: &[Option<Vec<f64>>]) -> Result<Vec<Option<Vec<f64>>>> {
+        match self.deflection {
+            DeflectionSolver::FixedPoint => unloaded
+                .par_iter()
+                .map_init(
+                    || TrueState::new(self.robot),
+                    |state, q0| {
+                        q0.as_ref()
+                            .map(|q0| {
+                                state.q0.copy_from_slice(q0);
+                                self.robot.deflect(state).map(|_| state.q.clone())
+                            })
+                            .transpose()
+                    },
+                )
+                .collect(),
+            DeflectionSolver::Rapier => {
+                let mut physics = self.robot.physics_reference(SettleOptions::default())?;
+                unloaded
+                    .iter()
+                    .map(|q0| {
+                        q0.as_ref()
+                            .map(|q0| physics.settle(q0).map(|s| s.q))
+                            .transpose()
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn measure(
+        &self,
+        r: u64,
+        attempt: u64,
+        i: u64,
+        region: &RegionConfig,
+        plan: Planned,
+        q_link: &[f64],
+        collision: &CollisionModel,
+        work: &mut Work,
+    ) -> std::result::Result<CampaignPoint, Reason> {
+        let mut rng = derive(self.seed, Stream::Measurement, &[r, attempt, i]);
+        self.robot
+            .reach_with_angles(q_link, Some(&mut rng), &mut work.state);
+        let true_flange = work.state.frames.flange;
+        let origin = self.tracker.origin();
+        let facing = true_flange.rotation * self.mounting.facing;
+        let true_reflectors: Vec<Point3<f64>> = self
+            .mounting
+            .actual
+            .iter()
+            .map(|p| true_flange * p)
+            .collect();
+        for p in &true_reflectors {
+            if !self.tracker.in_acceptance_cone(p, &facing) {
+                return Err(Reason::AcceptanceCone);
+            }
+            if collision.segment_blocked(&work.state.frames, &origin, p, BEAM_END_CLEARANCE_M) {
+                return Err(Reason::LineOfSight);
+            }
+        }
+        let measured = true_reflectors
+            .iter()
+            .map(|p| self.tracker.measure(p, &mut rng))
+            .collect();
+        Ok(CampaignPoint {
+            id: 0,
+            region: region.name.clone(),
+            nominal_reflectors: self
+                .mounting
+                .nominal
+                .iter()
+                .map(|p| plan.nominal_flange * p)
+                .collect(),
+            q_cmd: plan.q_cmd,
+            nominal_flange: plan.nominal_flange,
+            measured,
+            true_flange,
+            true_reflectors,
+            q_true: work.state.q.clone(),
+        })
+    }
+}

@@ -1,0 +1,153 @@
+//! Regions of the workspace and the target poses inside them.
+
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::distribution::DistributionKind;
+use crate::robot::collision::Obstacle;
+
+fn default_distribution() -> DistributionKind {
+    DistributionKind::Uniform
+}
+
+/// A box in the robot's base frame where the tool works, with the tool orientations allowed there.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RegionConfig {
+    pub name: String,
+    /// Centre of the box (m, base frame).
+    pub center_m: [f64; 3],
+    /// Side lengths along base x, y, z (m).
+    pub size_m: [f64; 3],
+    /// Measured points wanted in this region.
+    pub points: usize,
+    #[serde(default = "default_distribution")]
+    pub distribution: DistributionKind,
+    /// Nominal flange orientation: roll, pitch, yaw (deg, URDF fixed-axis convention, base frame).
+    pub tool_rpy_deg: [f64; 3],
+    /// The flange z axis may tilt up to this angle from its nominal direction (deg), uniform over the cone.
+    #[serde(default)]
+    pub cone_half_angle_deg: f64,
+    /// The flange may turn about its z axis by up to ± this angle (deg), uniform.
+    #[serde(default)]
+    pub spin_deg: f64,
+}
+
+impl RegionConfig {
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !finite(&self.center_m) || !finite(&self.tool_rpy_deg) {
+            return Err("center_m and tool_rpy_deg must be finite".into());
+        }
+        if !self.size_m.iter().all(|s| s.is_finite() && *s >= 0.0)
+            || self.size_m.iter().all(|s| *s == 0.0)
+        {
+            return Err(format!(
+                "size_m {:?} must be non-negative with one side at least non-zero",
+                self.size_m
+            ));
+        }
+        if self.points == 0 {
+            return Err("points must be at least 1".into());
+        }
+        if !(0.0..90.0).contains(&self.cone_half_angle_deg) {
+            return Err(format!(
+                "cone_half_angle_deg {} must lie in [0, 90)",
+                self.cone_half_angle_deg
+            ));
+        }
+        if !(0.0..=180.0).contains(&self.spin_deg) {
+            return Err(format!("spin_deg {} must lie in [0, 180]", self.spin_deg));
+        }
+        Ok(())
+    }
+
+    pub fn min_corner(&self) -> Point3<f64> {
+        Point3::from(Vector3::from(self.center_m) - Vector3::from(self.size_m) / 2.0)
+    }
+
+    /// A point of the unit cube mapped into the box.
+    pub fn point_at(&self, unit: &[f64; 3]) -> Point3<f64> {
+        self.min_corner() + Vector3::from(self.size_m).component_mul(&Vector3::from(*unit))
+    }
+
+    pub fn nominal_rotation(&self) -> UnitQuaternion<f64> {
+        let [r, p, y] = self.tool_rpy_deg.map(f64::to_radians);
+        UnitQuaternion::from_euler_angles(r, p, y)
+    }
+
+    /// A flange orientation drawn uniformly from the cone (area-uniform tilt) and the spin range.
+    pub fn sample_rotation(&self, rng: &mut ChaCha8Rng) -> UnitQuaternion<f64> {
+        let nominal = self.nominal_rotation();
+        let cos_max = self.cone_half_angle_deg.to_radians().cos();
+        let tilt = rng.random_range(cos_max..=1.0).acos();
+        let azimuth = rng.random_range(0.0..std::f64::consts::TAU);
+        let spin = rng.random_range(-1.0..=1.0) * self.spin_deg.to_radians();
+        // The tilt axis is perpendicular to the nominal tool axis, at a random azimuth around it.
+        let axis_local = Vector3::new(azimuth.cos(), azimuth.sin(), 0.0);
+        let tilt_rot =
+            UnitQuaternion::from_axis_angle(&Unit::new_normalize(nominal * axis_local), tilt);
+        tilt_rot * nominal * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), spin)
+    }
+
+    pub fn target(&self, unit: &[f64; 3], rng: &mut ChaCha8Rng) -> Isometry3<f64> {
+        let p = self.point_at(unit);
+        Isometry3::from_parts(Translation3::from(p.coords), self.sample_rotation(rng))
+    }
+}
+
+fn default_limit_margin() -> f64 {
+    2.0
+}
+
+/// How the arm is posed for a campaign, and what stands in its way.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignConfig {
+    /// The posture inverse kinematics starts from and is drawn toward in the null space (deg, per joint).
+    /// It fixes the arm's branch (elbow up or down, wrist flip) for the whole campaign.
+    pub posture_deg: Vec<f64>,
+    /// Per-point random change of the posture target (deg, uniform ±): varies the redundancy (the iiwa's
+    /// elbow) within the branch. 0 keeps one redundancy resolution for the whole campaign.
+    #[serde(default)]
+    pub posture_spread_deg: f64,
+    /// Solutions closer than this to a joint limit are rejected (deg).
+    #[serde(default = "default_limit_margin")]
+    pub limit_margin_deg: f64,
+    /// Boxes in the scene the arm must not touch (a table, fixtures), base frame.
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+}
+
+impl CampaignConfig {
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.posture_deg.iter().any(|v| !v.is_finite()) {
+            return Err("posture_deg must be finite".into());
+        }
+        for (name, v) in [
+            ("posture_spread_deg", self.posture_spread_deg),
+            ("limit_margin_deg", self.limit_margin_deg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} = {v} must be finite and non-negative"));
+            }
+        }
+        for o in &self.obstacles {
+            if !o
+                .center
+                .iter()
+                .chain(&o.half_extents)
+                .all(|v| v.is_finite())
+                || o.half_extents.iter().any(|h| *h <= 0.0)
+            {
+                return Err(format!(
+                    "obstacle '{}' needs finite centre and positive half_extents",
+                    o.name
+                ));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,88 @@
+//! The paper's "Measured" column and the error budget of a campaign.
+//!
+//! "Measured" is what a user sees before any calibration: tracker points registered rigidly (least squares)
+//! onto the nominal reflector positions, and the distances that remain. The budget repeats that on the true
+//! reflector positions (no tracker noise) for the robot as it is, for the robot with only its elasticity, and
+//! for the robot with only its rigid errors, so a scenario author sees what carries the error.
+
+use nalgebra::Point3;
+use serde::Serialize;
+
+use super::stats::Stats;
+use crate::calib::registration::register_points;
+use crate::error::{Error, Result};
+use crate::robot::Chain;
+use crate::robot::kinematics::flange_pose;
+use crate::tracker::reflector::Mounting;
+use crate::truth::{Perturbation, TrueRobot, TrueState};
+
+/// Distances (m) between `reference` points and `measured` points after the least-squares rigid
+/// registration of `measured` onto `reference`.
+pub fn registered_distances(
+    reference: &[Point3<f64>],
+    measured: &[Point3<f64>],
+) -> Result<Vec<f64>> {
+    let fit = register_points(measured, reference)?;
+    Ok(fit.residuals)
+}
+
+/// The centre of a point's reflectors: the reflector itself for a position campaign, the nest centre for a
+/// nest (about which an unknown nest rotation turns, so its position error is the robot's alone).
+pub fn centre(points: &[Point3<f64>]) -> Point3<f64> {
+    Point3::from(
+        points
+            .iter()
+            .map(|p| p.coords)
+            .sum::<nalgebra::Vector3<f64>>()
+            / points.len().max(1) as f64,
+    )
+}
+
+/// Registered distance statistics (m) of the true reflector centres, by error source.
+#[derive(Clone, Debug, Serialize)]
+pub struct Budget {
+    /// The true robot without repeatability or tracker noise.
+    pub all_systematic: Stats,
+    /// Nominal geometry and mounting, with the true joint stiffness: gravity and payload deflection only.
+    pub elastic_only: Stats,
+    /// The true geometry, zero offsets, gear errors and mounting, with infinitely stiff joints.
+    pub rigid_only: Stats,
+}
+
+impl Budget {
+    pub fn of(
+        nominal: &Chain,
+        robot: &TrueRobot,
+        mounting: &Mounting,
+        commands: &[Vec<f64>],
+    ) -> Result<Budget> {
+        let nominal_centre = centre(&mounting.nominal);
+        let reference: Vec<Point3<f64>> = commands
+            .iter()
+            .map(|q| flange_pose(nominal, q) * nominal_centre)
+            .collect();
+        let distances = |robot: &TrueRobot, reflectors: &[Point3<f64>]| -> Result<Stats> {
+            let mut state = TrueState::new(robot);
+            let local = centre(reflectors);
+            let mut points = Vec::with_capacity(reference.len());
+            for q in commands {
+                points.push(robot.flange_pose(q, &mut state)? * local);
+            }
+            Stats::of(&registered_distances(&reference, &points)?)
+                .ok_or_else(|| Error::Invalid("no points for the error budget".into()))
+        };
+        let elastic = TrueRobot::new(
+            nominal,
+            Perturbation::rigid_geometry(robot.perturbation.stiffness.clone()),
+            robot.payload,
+        )?;
+        let mut stiff = robot.perturbation.clone();
+        stiff.stiffness.iter_mut().for_each(|k| *k *= 1e12);
+        let rigid = TrueRobot::new(nominal, stiff, robot.payload)?;
+        Ok(Budget {
+            all_systematic: distances(robot, &mounting.actual)?,
+            elastic_only: distances(&elastic, &mounting.nominal)?,
+            rigid_only: distances(&rigid, &mounting.actual)?,
+        })
+    }
+}

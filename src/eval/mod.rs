@@ -1,0 +1,8 @@
+//! Evaluation: error statistics as the paper reports them, and what the errors of a campaign are made of.
+//! The only stage allowed to read the truth.
+
+pub mod budget;
+pub mod stats;
+
+pub use budget::{Budget, centre, registered_distances};
+pub use stats::Stats;

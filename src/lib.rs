@@ -1,0 +1,19 @@
+//! calibench: a benchmark harness for robot absolute-accuracy calibration.
+//!
+//! Modules follow the pipeline of `DESIGN.md`, each depending only on those to its left:
+//! `robot` → `truth` → `tracker` → `campaign` → `measurements` → `calib`; `scenario` reads the
+//! configuration of all of them, `rng` and `error` serve every stage.
+
+pub mod calib;
+pub mod campaign;
+pub mod error;
+pub mod eval;
+pub mod measurements;
+pub mod output;
+pub mod rng;
+pub mod robot;
+pub mod scenario;
+pub mod tracker;
+pub mod truth;
+
+pub use error::{Error, Result};

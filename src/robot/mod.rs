@@ -1,0 +1,14 @@
+//! The nominal robot: a serial chain loaded from URDF, its kinematics, statics and inverse kinematics.
+//!
+//! The [`Chain`] is the immutable model; [`Frames`] is the per-call workspace.
+
+pub mod chain;
+pub mod collision;
+pub mod dh;
+pub mod dynamics;
+pub mod ik;
+pub mod kinematics;
+pub mod urdf;
+
+pub use chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Payload, Shape};
+pub use kinematics::{Frames, flange_pose, forward_kinematics, point_jacobian};

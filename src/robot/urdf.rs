@@ -1,0 +1,446 @@
+//! URDF → [`Chain`]. Any serial URDF with revolute, continuous, prismatic and fixed joints.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+
+use super::chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Shape};
+use crate::error::{Error, Result};
+
+/// Reads a URDF file. `flange_link` names the tool flange; `None` takes the chain's last link.
+pub fn load_file(path: impl AsRef<Path>, flange_link: Option<&str>) -> Result<Chain> {
+    let path = path.as_ref();
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Urdf {
+        origin: origin.clone(),
+        message: format!("cannot read: {e}"),
+    })?;
+    load_str(&text, &origin, flange_link)
+}
+
+/// Parses URDF text; `origin` names it in error messages.
+pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Chain> {
+    let err = |message: String| Error::Urdf {
+        origin: origin.to_string(),
+        message,
+    };
+    let robot = urdf_rs::read_from_string(xml)
+        .map_err(|e| err(format!("not a valid URDF: {}", first_line(&e.to_string()))))?;
+    if robot.links.is_empty() {
+        return Err(err("no links".into()));
+    }
+
+    let link_index: HashMap<&str, usize> = robot
+        .links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (l.name.as_str(), i))
+        .collect();
+    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+    let mut child_joints: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+    for (ji, j) in robot.joints.iter().enumerate() {
+        let parent = *link_index.get(j.parent.link.as_str()).ok_or_else(|| {
+            err(format!(
+                "joint '{}' names parent link '{}', which does not exist",
+                j.name, j.parent.link
+            ))
+        })?;
+        let child = *link_index.get(j.child.link.as_str()).ok_or_else(|| {
+            err(format!(
+                "joint '{}' names child link '{}', which does not exist",
+                j.name, j.child.link
+            ))
+        })?;
+        if let Some(other) = parent_joint[child] {
+            return Err(err(format!(
+                "link '{}' is the child of two joints ('{}' and '{}'): a closed loop, not a serial chain",
+                j.child.link, robot.joints[other].name, j.name
+            )));
+        }
+        parent_joint[child] = Some(ji);
+        child_joints[parent].push(ji);
+    }
+    let roots: Vec<usize> = (0..robot.links.len())
+        .filter(|&i| parent_joint[i].is_none())
+        .collect();
+    let root = match roots.as_slice() {
+        [r] => *r,
+        [] => return Err(err("every link has a parent: the joints form a loop".into())),
+        many => {
+            let names: Vec<&str> = many.iter().map(|&i| robot.links[i].name.as_str()).collect();
+            return Err(err(format!(
+                "several root links ({}): not one connected chain",
+                names.join(", ")
+            )));
+        }
+    };
+
+    // Walk root → leaf, refusing branches: a calibration chain has one tool.
+    let mut path_joints = Vec::new();
+    let mut link = root;
+    let mut visited = vec![false; robot.links.len()];
+    loop {
+        if visited[link] {
+            return Err(err("the joints form a loop".into()));
+        }
+        visited[link] = true;
+        match child_joints[link].as_slice() {
+            [] => break,
+            [j] => {
+                path_joints.push(*j);
+                link = link_index[robot.joints[*j].child.link.as_str()];
+            }
+            many => {
+                let names: Vec<&str> = many
+                    .iter()
+                    .map(|&j| robot.joints[j].name.as_str())
+                    .collect();
+                return Err(err(format!(
+                    "link '{}' branches into joints {}: only serial chains are supported",
+                    robot.links[link].name,
+                    names.join(", ")
+                )));
+            }
+        }
+    }
+    if let Some(unvisited) = visited.iter().position(|v| !v) {
+        return Err(err(format!(
+            "link '{}' is not on the chain from the root: the joints form a loop",
+            robot.links[unvisited].name
+        )));
+    }
+
+    let flange_name = match flange_link {
+        Some(name) => {
+            if !link_index.contains_key(name) {
+                return Err(err(format!("flange link '{name}' does not exist")));
+            }
+            name.to_string()
+        }
+        None => robot.links[link].name.clone(),
+    };
+
+    let mut joints = Vec::new();
+    let mut bodies = vec![Body {
+        links: Vec::new(),
+        inertial: Inertial::ZERO,
+        colliders: Vec::new(),
+    }];
+    // Pose of the current URDF link in the frame of the body it is merged into.
+    let mut in_body = Isometry3::identity();
+    let mut flange = None;
+    let mut current = root;
+    let attach =
+        |bodies: &mut Vec<Body>, link: &urdf_rs::Link, pose: &Isometry3<f64>| -> Result<()> {
+            let body = bodies.last_mut().expect("bodies start non-empty");
+            body.links.push(link.name.clone());
+            let inertial =
+                link_inertial(link).map_err(|m| err(format!("link '{}': {m}", link.name)))?;
+            body.inertial = body.inertial.combined(&inertial.transformed(pose));
+            for c in &link.collision {
+                let local =
+                    pose_of(&c.origin).map_err(|m| err(format!("link '{}': {m}", link.name)))?;
+                if let Some(shape) =
+                    shape_of(&c.geometry).map_err(|m| err(format!("link '{}': {m}", link.name)))?
+                {
+                    body.colliders.push(Collider {
+                        origin: pose * local,
+                        shape,
+                        link: link.name.clone(),
+                    });
+                }
+            }
+            Ok(())
+        };
+    attach(&mut bodies, &robot.links[current], &in_body)?;
+    if robot.links[current].name == flange_name {
+        flange = Some(in_body);
+    }
+    for &ji in &path_joints {
+        if flange.is_some() {
+            break;
+        }
+        let j = &robot.joints[ji];
+        let origin = pose_of(&j.origin).map_err(|m| err(format!("joint '{}': {m}", j.name)))?;
+        current = link_index[j.child.link.as_str()];
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Fixed => None,
+            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                Some(JointKind::Revolute)
+            }
+            urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
+            ref other => {
+                return Err(err(format!(
+                    "joint '{}' has type {other:?}; only revolute, continuous, prismatic and fixed are supported",
+                    j.name
+                )));
+            }
+        };
+        match kind {
+            None => in_body *= origin,
+            Some(kind) => {
+                let axis = Vector3::from(j.axis.xyz.0);
+                if !axis.iter().all(|v| v.is_finite()) || axis.norm() < 1e-9 {
+                    return Err(err(format!(
+                        "joint '{}' has a zero or invalid axis",
+                        j.name
+                    )));
+                }
+                let (lower, upper) = match j.joint_type {
+                    urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+                    _ => (j.limit.lower, j.limit.upper),
+                };
+                if lower.is_nan() || upper.is_nan() || lower > upper {
+                    return Err(err(format!(
+                        "joint '{}' has limits [{lower}, {upper}]",
+                        j.name
+                    )));
+                }
+                joints.push(Joint {
+                    name: j.name.clone(),
+                    kind,
+                    origin: in_body * origin,
+                    axis: Unit::new_normalize(axis),
+                    lower,
+                    upper,
+                    effort: j.limit.effort,
+                });
+                bodies.push(Body {
+                    links: Vec::new(),
+                    inertial: Inertial::ZERO,
+                    colliders: Vec::new(),
+                });
+                in_body = Isometry3::identity();
+            }
+        }
+        attach(&mut bodies, &robot.links[current], &in_body)?;
+        if robot.links[current].name == flange_name {
+            flange = Some(in_body);
+        }
+    }
+    let Some(flange) = flange else {
+        return Err(err(format!(
+            "flange link '{flange_name}' is not on the chain"
+        )));
+    };
+    if joints.is_empty() {
+        return Err(err("no movable joint".into()));
+    }
+    Ok(Chain {
+        name: robot.name.clone(),
+        base: Isometry3::identity(),
+        joints,
+        bodies,
+        flange,
+        flange_link: flange_name,
+    })
+}
+
+fn first_line(s: &str) -> &str {
+    s.lines().next().unwrap_or(s)
+}
+
+fn finite3(v: &[f64; 3], what: &str) -> std::result::Result<(), String> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(format!("{what} {v:?} is not finite"))
+    }
+}
+
+fn pose_of(p: &urdf_rs::Pose) -> std::result::Result<Isometry3<f64>, String> {
+    finite3(&p.xyz.0, "origin xyz")?;
+    finite3(&p.rpy.0, "origin rpy")?;
+    let [x, y, z] = p.xyz.0;
+    let [r, pi, ya] = p.rpy.0;
+    // URDF rpy is fixed-axis X, then Y, then Z: R = Rz(yaw) Ry(pitch) Rx(roll), as nalgebra's euler angles.
+    Ok(Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(r, pi, ya),
+    ))
+}
+
+fn link_inertial(link: &urdf_rs::Link) -> std::result::Result<Inertial, String> {
+    let i = &link.inertial;
+    let m = i.mass.value;
+    let t = &i.inertia;
+    let vals = [m, t.ixx, t.ixy, t.ixz, t.iyy, t.iyz, t.izz];
+    if vals.iter().any(|v| !v.is_finite()) || m < 0.0 {
+        return Err(format!(
+            "inertial has a negative or non-finite value: {vals:?}"
+        ));
+    }
+    let frame = pose_of(&i.origin)?;
+    let tensor = Matrix3::new(
+        t.ixx, t.ixy, t.ixz, t.ixy, t.iyy, t.iyz, t.ixz, t.iyz, t.izz,
+    );
+    Ok(Inertial {
+        mass: m,
+        com: Point3::origin(),
+        inertia: tensor,
+    }
+    .transformed(&frame))
+}
+
+/// `None` for meshes: the harness uses primitives only (see `robots/`); a mesh collision is skipped.
+fn shape_of(g: &urdf_rs::Geometry) -> std::result::Result<Option<Shape>, String> {
+    let positive = |v: f64, what: &str| {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(format!("collision {what} {v} must be positive"))
+        }
+    };
+    Ok(match g {
+        urdf_rs::Geometry::Box { size } => {
+            let s = size.0;
+            Some(Shape::Cuboid {
+                half_extents: [
+                    positive(s[0], "box size")? / 2.0,
+                    positive(s[1], "box size")? / 2.0,
+                    positive(s[2], "box size")? / 2.0,
+                ],
+            })
+        }
+        urdf_rs::Geometry::Cylinder { radius, length } => Some(Shape::Cylinder {
+            radius: positive(*radius, "radius")?,
+            length: positive(*length, "length")?,
+        }),
+        urdf_rs::Geometry::Capsule { radius, length } => Some(Shape::Capsule {
+            radius: positive(*radius, "radius")?,
+            length: positive(*length, "length")?,
+        }),
+        urdf_rs::Geometry::Sphere { radius } => Some(Shape::Sphere {
+            radius: positive(*radius, "radius")?,
+        }),
+        urdf_rs::Geometry::Mesh { .. } => None,
+    })
+}
+
+/// Writes a chain back as URDF text, one link per body with its merged inertial and a payload folded into
+/// the last body. The physics reference builds its multibody from this, so it sees exactly the geometry
+/// and masses of the chain (perturbed or not). Colliders are left out: the physics needs mass, not contact.
+///
+/// The text describes the chain in its own base frame: `chain.base` is not written, because URDF loaders
+/// (rapier's among them) drop a fixed joint from an empty root link. A caller that needs the base pose
+/// expresses gravity in the base frame instead.
+pub fn to_urdf_string(chain: &Chain, payload: &super::chain::Payload) -> Result<String> {
+    let pose = |iso: &Isometry3<f64>| {
+        let (r, p, y) = iso.rotation.euler_angles();
+        let t = iso.translation.vector;
+        urdf_rs::Pose {
+            xyz: urdf_rs::Vec3([t.x, t.y, t.z]),
+            rpy: urdf_rs::Vec3([r, p, y]),
+        }
+    };
+    let link = |name: String, inertial: &Inertial| {
+        let i = &inertial.inertia;
+        urdf_rs::Link {
+            name,
+            inertial: urdf_rs::Inertial {
+                origin: pose(&Isometry3::translation(
+                    inertial.com.x,
+                    inertial.com.y,
+                    inertial.com.z,
+                )),
+                mass: urdf_rs::Mass {
+                    value: inertial.mass,
+                },
+                inertia: urdf_rs::Inertia {
+                    ixx: i[(0, 0)],
+                    ixy: i[(0, 1)],
+                    ixz: i[(0, 2)],
+                    iyy: i[(1, 1)],
+                    iyz: i[(1, 2)],
+                    izz: i[(2, 2)],
+                },
+            },
+            visual: Vec::new(),
+            collision: Vec::new(),
+        }
+    };
+    let joint = |name: String,
+                 joint_type: urdf_rs::JointType,
+                 origin: &Isometry3<f64>,
+                 parent: &str,
+                 child: &str,
+                 axis: Vector3<f64>,
+                 limit: urdf_rs::JointLimit| urdf_rs::Joint {
+        name,
+        joint_type,
+        origin: pose(origin),
+        parent: urdf_rs::LinkName {
+            link: parent.to_string(),
+        },
+        child: urdf_rs::LinkName {
+            link: child.to_string(),
+        },
+        axis: urdf_rs::Axis {
+            xyz: urdf_rs::Vec3([axis.x, axis.y, axis.z]),
+        },
+        limit,
+        calibration: None,
+        dynamics: None,
+        mimic: None,
+        safety_controller: None,
+    };
+
+    let body_name = |i: usize| {
+        chain.bodies[i]
+            .links
+            .first()
+            .cloned()
+            .unwrap_or_else(|| format!("body_{i}"))
+    };
+    let n = chain.dof();
+    let mut links = Vec::new();
+    let mut joints = Vec::new();
+    for (i, body) in chain.bodies.iter().enumerate() {
+        let mut inertial = body.inertial;
+        if i == n && payload.mass > 0.0 {
+            let load = Inertial {
+                mass: payload.mass,
+                com: chain.flange * Point3::from(payload.com),
+                inertia: Matrix3::zeros(),
+            };
+            inertial = inertial.combined(&load);
+        }
+        links.push(link(body_name(i), &inertial));
+        if i > 0 {
+            let j = &chain.joints[i - 1];
+            let (joint_type, lower, upper) =
+                match (j.kind, j.lower.is_finite() && j.upper.is_finite()) {
+                    (JointKind::Prismatic, _) => (urdf_rs::JointType::Prismatic, j.lower, j.upper),
+                    (JointKind::Revolute, true) => (urdf_rs::JointType::Revolute, j.lower, j.upper),
+                    (JointKind::Revolute, false) => (urdf_rs::JointType::Continuous, 0.0, 0.0),
+                };
+            joints.push(joint(
+                j.name.clone(),
+                joint_type,
+                &j.origin,
+                &body_name(i - 1),
+                &body_name(i),
+                j.axis.into_inner(),
+                urdf_rs::JointLimit {
+                    lower,
+                    upper,
+                    effort: j.effort,
+                    velocity: 1.0,
+                    ..Default::default()
+                },
+            ));
+        }
+    }
+    let robot = urdf_rs::Robot {
+        name: chain.name.clone(),
+        version: None,
+        links,
+        joints,
+        materials: Vec::new(),
+    };
+    urdf_rs::write_to_string(&robot).map_err(|e| Error::Urdf {
+        origin: chain.name.clone(),
+        message: format!("cannot write: {e}"),
+    })
+}

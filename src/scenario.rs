@@ -1,0 +1,158 @@
+//! Scenario files (TOML): everything a campaign is made of, each section owned by the stage that uses it.
+//! Every field is documented in `scenarios/README.md`; unknown keys are refused, so a typo is an error, not
+//! a silently ignored setting.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::campaign::{CampaignConfig, RegionConfig};
+use crate::error::{Error, Result};
+use crate::robot::{Chain, Payload, urdf};
+use crate::tracker::TrackerConfig;
+use crate::tracker::reflector::ReflectorConfig;
+use crate::truth::ErrorModel;
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Names the results directory and every report row.
+    pub name: String,
+    /// Every random draw of the scenario derives from this seed.
+    pub seed: u64,
+    pub robot: RobotConfig,
+    pub truth: ErrorModel,
+    pub tracker: TrackerConfig,
+    pub reflectors: ReflectorConfig,
+    pub campaign: CampaignConfig,
+    pub regions: Vec<RegionConfig>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// URDF path, relative to the working directory (or, failing that, to the scenario file's directory).
+    pub urdf: PathBuf,
+    /// Link that carries the reflectors; defaults to the chain's last link.
+    #[serde(default)]
+    pub flange_link: Option<String>,
+    /// Mass carried on the flange (kg): the reflector nest, a tool.
+    #[serde(default)]
+    pub payload_kg: f64,
+    /// Its centre of mass in the flange frame (m).
+    #[serde(default)]
+    pub payload_com_m: [f64; 3],
+}
+
+impl RobotConfig {
+    pub fn payload(&self) -> Payload {
+        Payload {
+            mass: self.payload_kg,
+            com: self.payload_com_m,
+        }
+    }
+}
+
+impl Scenario {
+    /// Reads and checks a scenario file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Scenario> {
+        let path = path.as_ref();
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Scenario {
+            origin: origin.clone(),
+            message: format!("cannot read: {e}"),
+        })?;
+        let mut scenario = Scenario::parse(&text, &origin)?;
+        scenario.robot.urdf = resolve(&scenario.robot.urdf, path.parent());
+        Ok(scenario)
+    }
+
+    /// Parses scenario text; `origin` names it in messages. Errors carry the line and column of the fault.
+    pub fn parse(text: &str, origin: &str) -> Result<Scenario> {
+        let scenario: Scenario = toml::from_str(text).map_err(|e| {
+            let location = e
+                .span()
+                .map(|span| {
+                    let before = &text[..span.start.min(text.len())];
+                    let line = before.matches('\n').count() + 1;
+                    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                    format!("line {line}, column {column}: ")
+                })
+                .unwrap_or_default();
+            Error::Scenario {
+                origin: origin.to_string(),
+                message: format!("{location}{}", e.message().trim().replace('\n', " ")),
+            }
+        })?;
+        scenario.validate().map_err(|message| Error::Scenario {
+            origin: origin.to_string(),
+            message,
+        })?;
+        Ok(scenario)
+    }
+
+    /// Checks that need no robot: the robot-dependent ones happen in [`Scenario::load_robot`].
+    fn validate(&self) -> std::result::Result<(), String> {
+        if self.name.trim().is_empty() || self.name.contains(['/', '\\']) {
+            return Err(format!(
+                "name '{}' must be non-empty and contain no path separator",
+                self.name
+            ));
+        }
+        let p = &self.robot;
+        if !(p.payload_kg.is_finite() && p.payload_kg >= 0.0)
+            || p.payload_com_m.iter().any(|c| !c.is_finite())
+        {
+            return Err(
+                "robot.payload_kg must be finite and non-negative, payload_com_m finite".into(),
+            );
+        }
+        if self.regions.is_empty() {
+            return Err("no [[regions]]: a campaign needs at least one".into());
+        }
+        for (i, r) in self.regions.iter().enumerate() {
+            r.validate()
+                .map_err(|m| format!("regions[{i}] ('{}'): {m}", r.name))?;
+            if self.regions[..i].iter().any(|o| o.name == r.name) {
+                return Err(format!("regions[{i}]: the name '{}' is used twice", r.name));
+            }
+        }
+        self.reflectors
+            .validate()
+            .map_err(|m| format!("reflectors: {m}"))?;
+        self.campaign
+            .validate()
+            .map_err(|m| format!("campaign: {m}"))?;
+        Ok(())
+    }
+
+    /// Loads the scenario's robot and checks the fields that depend on it (joint counts).
+    pub fn load_robot(&self) -> Result<Chain> {
+        let chain = urdf::load_file(&self.robot.urdf, self.robot.flange_link.as_deref())?;
+        let scenario_err = |message: String| Error::Scenario {
+            origin: self.name.clone(),
+            message,
+        };
+        self.truth
+            .validate(chain.dof())
+            .map_err(|e| scenario_err(e.to_string().replace("invalid input: ", "truth.")))?;
+        if self.campaign.posture_deg.len() != chain.dof() {
+            return Err(scenario_err(format!(
+                "campaign.posture_deg has {} values, the robot has {} joints",
+                self.campaign.posture_deg.len(),
+                chain.dof()
+            )));
+        }
+        Ok(chain)
+    }
+}
+
+fn resolve(path: &Path, scenario_dir: Option<&Path>) -> PathBuf {
+    if path.is_absolute() || path.exists() {
+        return path.to_path_buf();
+    }
+    match scenario_dir {
+        Some(dir) if dir.join(path).exists() => dir.join(path),
+        _ => path.to_path_buf(),
+    }
+}

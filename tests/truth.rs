@@ -1,0 +1,119 @@
+//! The true robot: sampled perturbations, the fast static deflection and its rapier reference.
+
+use calibench::robot::{Chain, Payload, urdf};
+use calibench::truth::physics::SettleOptions;
+use calibench::truth::{ErrorModel, Perturbation, TrueRobot, TrueState};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn iiwa() -> Chain {
+    urdf::load_file("robots/iiwa7.urdf", None).expect("the shipped URDF loads")
+}
+
+fn model() -> ErrorModel {
+    ErrorModel {
+        frame_translation_m: 1e-4,
+        frame_rotation_rad: 2e-4,
+        joint_zero_rad: 2e-4,
+        base_translation_m: 5e-4,
+        base_rotation_rad: 5e-4,
+        stiffness_nm_per_rad: vec![2.0e4, 1.5e4, 1.2e4, 1.0e4, 5e3, 4e3, 3e3],
+        stiffness_spread: 0.1,
+        gear_orders: vec![1, 2],
+        gear_amplitude_rad: 2e-5,
+        repeatability_rad: 1e-5,
+        deflection: Default::default(),
+    }
+}
+
+fn payload() -> Payload {
+    Payload {
+        mass: 0.8,
+        com: [0.0, 0.0, 0.06],
+    }
+}
+
+fn random_q(chain: &Chain, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    chain
+        .joints
+        .iter()
+        .map(|j| rng.random_range(0.8 * j.lower..0.8 * j.upper))
+        .collect()
+}
+
+#[test]
+fn a_seed_gives_one_robot() {
+    let chain = iiwa();
+    let a = Perturbation::sample(&model(), 7, &mut ChaCha8Rng::seed_from_u64(5)).unwrap();
+    let b = Perturbation::sample(&model(), 7, &mut ChaCha8Rng::seed_from_u64(5)).unwrap();
+    let c = Perturbation::sample(&model(), 7, &mut ChaCha8Rng::seed_from_u64(6)).unwrap();
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    let wrong = ErrorModel {
+        stiffness_nm_per_rad: vec![1e4; 6],
+        ..model()
+    };
+    let e =
+        Perturbation::sample(&wrong, chain.dof(), &mut ChaCha8Rng::seed_from_u64(5)).unwrap_err();
+    assert!(e.to_string().contains("6 values"), "{e}");
+}
+
+#[test]
+fn fixed_point_deflection_is_the_static_equilibrium() {
+    let chain = iiwa();
+    let p = Perturbation::sample(&model(), 7, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+    let robot = TrueRobot::new(&chain, p.clone(), payload()).unwrap();
+    let mut state = TrueState::new(&robot);
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let mut tau = vec![0.0; 7];
+    let mut largest: f64 = 0.0;
+    for _ in 0..50 {
+        let q = random_q(&chain, &mut rng);
+        robot.reach(&q, None, &mut state).unwrap();
+        calibench::robot::dynamics::gravity_torques(
+            &robot.chain,
+            &state.frames,
+            &robot.payload,
+            &robot.gravity,
+            &mut tau,
+        );
+        for (i, t) in tau.iter().enumerate() {
+            let residual = p.stiffness[i] * (state.q[i] - state.q0[i]) - t;
+            assert!(residual.abs() < 1e-8, "joint {i}: K·Δq − τ = {residual} Nm");
+            largest = largest.max((state.q[i] - state.q0[i]).abs());
+        }
+    }
+    // The deflection is real, not vanishing: the arm sags by around a milliradian somewhere.
+    assert!(largest > 2e-4, "largest deflection {largest} rad");
+}
+
+#[test]
+fn rapier_and_fixed_point_agree_at_the_flange() {
+    let chain = iiwa();
+    let p = Perturbation::sample(&model(), 7, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+    let robot = TrueRobot::new(&chain, p, payload()).unwrap();
+    let mut physics = robot.physics_reference(SettleOptions::default()).unwrap();
+    let mut fast = TrueState::new(&robot);
+    let mut reference = TrueState::new(&robot);
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut worst: f64 = 0.0;
+    let mut sag: f64 = 0.0;
+    for _ in 0..24 {
+        let q = random_q(&chain, &mut rng);
+        robot.reach(&q, None, &mut fast).unwrap();
+        let settled = physics.settle(&fast.q0).unwrap();
+        robot.reach_with_angles(&settled.q, None, &mut reference);
+        let gap = (fast.frames.flange.translation.vector
+            - reference.frames.flange.translation.vector)
+            .norm();
+        worst = worst.max(gap);
+        let unloaded = calibench::robot::flange_pose(&robot.chain, &fast.q0);
+        sag = sag.max((unloaded.translation.vector - fast.frames.flange.translation.vector).norm());
+    }
+    assert!(
+        worst <= 1e-6,
+        "rapier and fixed point differ by {worst} m at the flange"
+    );
+    // The agreement means something only if the deflection itself is far larger than the tolerance.
+    assert!(sag > 3e-4, "largest flange sag {sag} m");
+}
