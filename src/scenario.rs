@@ -26,6 +26,9 @@ pub struct Scenario {
     pub reflectors: ReflectorConfig,
     pub campaign: CampaignConfig,
     pub regions: Vec<RegionConfig>,
+    /// Where the scenario came from (its path), for messages; not part of the file.
+    #[serde(skip)]
+    pub origin: String,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -69,14 +72,28 @@ impl Scenario {
 
     /// Parses scenario text; `origin` names it in messages. Errors carry the line and column of the fault.
     pub fn parse(text: &str, origin: &str) -> Result<Scenario> {
-        let scenario: Scenario = toml::from_str(text).map_err(|e| {
+        let mut scenario: Scenario = toml::from_str(text).map_err(|e| {
             let location = e
                 .span()
                 .map(|span| {
                     let before = &text[..span.start.min(text.len())];
                     let line = before.matches('\n').count() + 1;
-                    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-                    format!("line {line}, column {column}: ")
+                    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+                    let column = before.len() - line_start + 1;
+                    // A bad value's span points at the value: name the key written before it on its line.
+                    let key = text[line_start..]
+                        .lines()
+                        .next()
+                        .and_then(|l| l.split_once('='))
+                        .map(|(k, _)| k.trim())
+                        .filter(|k| {
+                            !k.is_empty()
+                                && !k.starts_with('[')
+                                && !e.message().contains(&format!("`{k}`"))
+                        })
+                        .map(|k| format!("`{k}`: "))
+                        .unwrap_or_default();
+                    format!("line {line}, column {column}: {key}")
                 })
                 .unwrap_or_default();
             Error::Scenario {
@@ -88,6 +105,7 @@ impl Scenario {
             origin: origin.to_string(),
             message,
         })?;
+        scenario.origin = origin.to_string();
         Ok(scenario)
     }
 
@@ -130,12 +148,12 @@ impl Scenario {
     pub fn load_robot(&self) -> Result<Chain> {
         let chain = urdf::load_file(&self.robot.urdf, self.robot.flange_link.as_deref())?;
         let scenario_err = |message: String| Error::Scenario {
-            origin: self.name.clone(),
+            origin: self.origin.clone(),
             message,
         };
         self.truth
             .validate(chain.dof())
-            .map_err(|e| scenario_err(e.to_string().replace("invalid input: ", "truth.")))?;
+            .map_err(|e| scenario_err(e.to_string().replace("invalid input: ", "")))?;
         if self.campaign.posture_deg.len() != chain.dof() {
             return Err(scenario_err(format!(
                 "campaign.posture_deg has {} values, the robot has {} joints",

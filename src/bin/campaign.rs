@@ -6,17 +6,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::Parser;
-use nalgebra::Point3;
 use serde_json::json;
 
-use calibench::campaign::{Campaign, Setup};
-use calibench::eval::{Budget, Stats, centre, registered_distances};
-use calibench::rng::{Stream, derive};
+use calibench::eval::{Budget, Stats};
 use calibench::scenario::Scenario;
 use calibench::tracker::Tracker;
-use calibench::tracker::reflector::Mounting;
-use calibench::truth::{Perturbation, TrueRobot};
-use calibench::{Error, Result, measurements, output};
+use calibench::{Error, Result, campaign, eval, measurements, output};
 
 /// The scenario run when none is given: the paper's first data set.
 const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/paper_iiwa.toml");
@@ -63,33 +58,14 @@ fn run(args: &Args) -> Result<()> {
         None => Scenario::parse(DEFAULT_SCENARIO, "embedded paper_iiwa.toml")?,
     };
     let started = Instant::now();
-    let nominal = scenario.load_robot()?;
-    let perturbation = Perturbation::sample(
-        &scenario.truth,
-        nominal.dof(),
-        &mut derive(scenario.seed, Stream::Perturbation, &[]),
-    )?;
-    let robot = TrueRobot::new(&nominal, perturbation, scenario.robot.payload())?;
-    let tracker = Tracker::new(scenario.tracker.clone())?;
-    let mounting = Mounting::sample(
-        &scenario.reflectors,
-        &mut derive(scenario.seed, Stream::Mounting, &[]),
-    )?;
-    let setup = Setup {
-        nominal: &nominal,
-        robot: &robot,
-        tracker: &tracker,
-        mounting: &mounting,
-        config: &scenario.campaign,
-        deflection: scenario.truth.deflection,
-        seed: scenario.seed,
-    };
-    let campaign = setup.run(&scenario.regions)?;
+    let sim = campaign::simulate(&scenario)?;
     let generated = started.elapsed();
+    let (robot, tracker, mounting, campaign) =
+        (&sim.robot, &sim.tracker, &sim.mounting, &sim.campaign);
 
-    let measured = measured_errors(&campaign)?;
+    let measured = eval::measured(campaign)?;
     let commands: Vec<Vec<f64>> = campaign.points.iter().map(|p| p.q_cmd.clone()).collect();
-    let budget = Budget::of(&nominal, &robot, &mounting, &commands)?;
+    let budget = Budget::of(&sim.nominal, robot, mounting, &commands)?;
 
     let out = args
         .out
@@ -103,8 +79,8 @@ fn run(args: &Args) -> Result<()> {
             "perturbation": robot.perturbation,
             "mounting": mounting,
             "tracker_pose": {
-                "translation_m": robot_pose_translation(&tracker),
-                "rotation_quaternion_wxyz": quaternion(&tracker),
+                "translation_m": tracker_translation(tracker),
+                "rotation_quaternion_wxyz": tracker_quaternion(tracker),
             },
         },
         "measured_mm": measured.scaled(1e3),
@@ -121,9 +97,9 @@ fn run(args: &Args) -> Result<()> {
         &[
             (
                 "measurements.csv",
-                measurements::measurements_csv(&campaign)?,
+                measurements::measurements_csv(campaign)?,
             ),
-            ("truth.csv", measurements::truth_csv(&campaign)?),
+            ("truth.csv", measurements::truth_csv(campaign)?),
             ("campaign.json", json),
         ],
     )?;
@@ -165,28 +141,11 @@ fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// Tracker points registered onto the nominal reflector positions, one centre per point (the reflector, or
-/// the nest centre): what the user sees before calibrating, the paper's "Measured" column.
-fn measured_errors(campaign: &Campaign) -> Result<Stats> {
-    let nominal: Vec<Point3<f64>> = campaign
-        .points
-        .iter()
-        .map(|p| centre(&p.nominal_reflectors))
-        .collect();
-    let measured: Vec<Point3<f64>> = campaign
-        .points
-        .iter()
-        .map(|p| centre(&p.measured))
-        .collect();
-    Stats::of(&registered_distances(&nominal, &measured)?)
-        .ok_or_else(|| Error::Invalid("campaign has no points".into()))
-}
-
-fn robot_pose_translation(tracker: &Tracker) -> [f64; 3] {
+fn tracker_translation(tracker: &Tracker) -> [f64; 3] {
     tracker.pose.translation.vector.into()
 }
 
-fn quaternion(tracker: &Tracker) -> [f64; 4] {
+fn tracker_quaternion(tracker: &Tracker) -> [f64; 4] {
     let q = tracker.pose.rotation.quaternion();
     [q.w, q.i, q.j, q.k]
 }

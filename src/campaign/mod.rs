@@ -8,3 +8,54 @@ pub mod region;
 pub use distribution::{DistributionKind, PointDistribution};
 pub use generate::{Campaign, CampaignPoint, Rejections, Setup};
 pub use region::{CampaignConfig, RegionConfig};
+
+use crate::error::Result;
+use crate::rng::{Stream, derive};
+use crate::robot::Chain;
+use crate::scenario::Scenario;
+use crate::tracker::Tracker;
+use crate::tracker::reflector::Mounting;
+use crate::truth::{Perturbation, TrueRobot};
+
+/// A scenario made real: the robots, the instrument and the campaign they produce.
+pub struct Simulation {
+    pub nominal: Chain,
+    pub robot: TrueRobot,
+    pub tracker: Tracker,
+    pub mounting: Mounting,
+    pub campaign: Campaign,
+}
+
+/// Builds the nominal and true robots, the tracker and the reflector mounting from a scenario, and runs its
+/// campaign. Every draw derives from the scenario seed.
+pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
+    let nominal = scenario.load_robot()?;
+    let perturbation = Perturbation::sample(
+        &scenario.truth,
+        nominal.dof(),
+        &mut derive(scenario.seed, Stream::Perturbation, &[]),
+    )?;
+    let robot = TrueRobot::new(&nominal, perturbation, scenario.robot.payload())?;
+    let tracker = Tracker::new(scenario.tracker.clone())?;
+    let mounting = Mounting::sample(
+        &scenario.reflectors,
+        &mut derive(scenario.seed, Stream::Mounting, &[]),
+    )?;
+    let campaign = Setup {
+        nominal: &nominal,
+        robot: &robot,
+        tracker: &tracker,
+        mounting: &mounting,
+        config: &scenario.campaign,
+        deflection: scenario.truth.deflection,
+        seed: scenario.seed,
+    }
+    .run(&scenario.regions)?;
+    Ok(Simulation {
+        nominal,
+        robot,
+        tracker,
+        mounting,
+        campaign,
+    })
+}

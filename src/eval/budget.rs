@@ -10,6 +10,7 @@ use serde::Serialize;
 
 use super::stats::Stats;
 use crate::calib::registration::register_points;
+use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::kinematics::flange_pose;
@@ -36,6 +37,23 @@ pub fn centre(points: &[Point3<f64>]) -> Point3<f64> {
             .sum::<nalgebra::Vector3<f64>>()
             / points.len().max(1) as f64,
     )
+}
+
+/// The paper's "Measured" column: tracker points registered onto the nominal reflector positions, one centre
+/// per point (the reflector, or the nest centre), the distances that remain (m).
+pub fn measured(campaign: &Campaign) -> Result<Stats> {
+    let nominal: Vec<Point3<f64>> = campaign
+        .points
+        .iter()
+        .map(|p| centre(&p.nominal_reflectors))
+        .collect();
+    let measured: Vec<Point3<f64>> = campaign
+        .points
+        .iter()
+        .map(|p| centre(&p.measured))
+        .collect();
+    Stats::of(&registered_distances(&nominal, &measured)?)
+        .ok_or_else(|| Error::Invalid("the campaign has no points".into()))
 }
 
 /// Registered distance statistics (m) of the true reflector centres, by error source.

@@ -4,5 +4,5 @@
 pub mod budget;
 pub mod stats;
 
-pub use budget::{Budget, centre, registered_distances};
+pub use budget::{Budget, centre, measured, registered_distances};
 pub use stats::Stats;

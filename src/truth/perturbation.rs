@@ -60,13 +60,13 @@ impl ErrorModel {
         for (name, v) in scalars {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!(
-                    "errors.{name} = {v} must be finite and non-negative"
+                    "truth.{name} = {v} must be finite and non-negative"
                 ));
             }
         }
         if self.stiffness_nm_per_rad.len() != dof {
             return bad(format!(
-                "errors.stiffness_nm_per_rad has {} values, the robot has {dof} joints",
+                "truth.stiffness_nm_per_rad has {} values, the robot has {dof} joints",
                 self.stiffness_nm_per_rad.len()
             ));
         }
@@ -76,11 +76,11 @@ impl ErrorModel {
             .find(|k| !(k.is_finite() && **k > 0.0))
         {
             return bad(format!(
-                "errors.stiffness_nm_per_rad has {k}; every stiffness must be positive"
+                "truth.stiffness_nm_per_rad has {k}; every stiffness must be positive"
             ));
         }
         if self.stiffness_spread >= 0.5 {
-            return bad("errors.stiffness_spread must be below 0.5 (a relative scatter)".into());
+            return bad("truth.stiffness_spread must be below 0.5 (a relative scatter)".into());
         }
         Ok(())
     }

@@ -1,0 +1,503 @@
+//! The `campaign` binary end to end: determinism across thread counts, one-line errors that leave nothing
+//! behind, rejection bookkeeping, and files that keep the truth out of the measurements.
+//!
+//! Every scenario here is the shipped paper_iiwa (or paper_iiwa_pose) with a small point count, written to a
+//! temporary directory; the binary runs from the crate root so `robots/iiwa7.urdf` resolves.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use calibench::calib::registration::register_points;
+use nalgebra::Point3;
+use serde_json::Value;
+use tempfile::TempDir;
+
+const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
+const PAPER_POSE: &str = include_str!("../scenarios/paper_iiwa_pose.toml");
+const IIWA_URDF: &str = include_str!("../robots/iiwa7.urdf");
+const POINTS: usize = 120;
+
+/// `text` with `from` replaced by `to`, which must occur exactly once (so a changed shipped scenario fails
+/// loudly here instead of silently testing something else).
+fn edit(text: &str, from: &str, to: &str) -> String {
+    assert_eq!(
+        text.matches(from).count(),
+        1,
+        "expected exactly one `{from}` in the scenario"
+    );
+    text.replacen(from, to, 1)
+}
+
+/// paper_iiwa with `points` wanted.
+fn small_paper(points: usize) -> String {
+    edit(PAPER, "points = 2335", &format!("points = {points}"))
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write a temporary file");
+    path
+}
+
+fn campaign(args: &[&std::ffi::OsStr]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_campaign"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the campaign binary starts")
+}
+
+/// Runs `scenario` into `out` and returns the output, whatever the exit status.
+fn run(scenario: &Path, out: &Path, threads: Option<&str>) -> Output {
+    let mut args = vec![scenario.as_os_str(), "--out".as_ref(), out.as_os_str()];
+    if let Some(n) = threads {
+        args.push("--threads".as_ref());
+        args.push(n.as_ref());
+    }
+    campaign(&args)
+}
+
+/// Runs a scenario text that must succeed and returns its output directory.
+fn run_ok(dir: &TempDir, name: &str, text: &str, threads: Option<&str>) -> PathBuf {
+    let scenario = write(dir.path(), &format!("{name}.toml"), text);
+    let out = dir.path().join(format!("out_{name}"));
+    let output = run(&scenario, &out, threads);
+    assert!(
+        output.status.success(),
+        "{name} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    out
+}
+
+fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
+}
+
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .map(|e| e.expect("directory entry").path())
+        .flat_map(|p| if p.is_dir() { files_under(&p) } else { vec![p] })
+        .collect()
+}
+
+/// A failed run: non-zero exit, one non-empty `error:` line on stderr containing every `needles` entry, no
+/// panic, and no file in `out`. Returns the line.
+fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> String {
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        !output.status.success(),
+        "expected a failure, got success; stderr: {stderr}"
+    );
+    assert!(
+        !stderr.contains("panicked"),
+        "the binary panicked: {stderr}"
+    );
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "stderr must be exactly one line: {stderr:?}"
+    );
+    let line = lines[0];
+    assert!(
+        line.starts_with("error: ") && line.len() > "error: ".len(),
+        "stderr must be a non-empty `error:` line: {line:?}"
+    );
+    for needle in needles {
+        assert!(
+            line.contains(needle),
+            "{line:?} does not mention {needle:?}"
+        );
+    }
+    let left = files_under(out);
+    assert!(left.is_empty(), "a failed run left files behind: {left:?}");
+    line.to_string()
+}
+
+/// Runs a scenario text that must fail cleanly; returns the error line.
+fn run_failing(dir: &TempDir, name: &str, text: &str, needles: &[&str]) -> String {
+    let scenario = write(dir.path(), &format!("{name}.toml"), text);
+    let out = dir.path().join(format!("out_{name}"));
+    assert_clean_failure(&run(&scenario, &out, None), &out, needles)
+}
+
+/// 1-based line of the first occurrence of `needle` in `text`.
+fn line_of(text: &str, needle: &str) -> usize {
+    let at = text.find(needle).expect("needle in text");
+    text[..at].matches('\n').count() + 1
+}
+
+fn campaign_json(out: &Path) -> Value {
+    serde_json::from_slice(&read(&out.join("campaign.json"))).expect("campaign.json parses")
+}
+
+/// Checks every region's counts add up and that it delivered what was wanted; returns the region's counts.
+fn check_bookkeeping(report: &Value, region: &str, wanted: usize) -> Value {
+    let rejections = report["rejections"]
+        .as_object()
+        .expect("rejections is an object");
+    let mut used_total = 0;
+    for (name, r) in rejections {
+        let n = |key: &str| {
+            r[key]
+                .as_u64()
+                .unwrap_or_else(|| panic!("rejections.{name}.{key} is a count: {r}"))
+        };
+        let rejected: u64 = [
+            "out_of_reach",
+            "joint_limits",
+            "self_collision",
+            "environment_collision",
+            "line_of_sight",
+            "acceptance_cone",
+        ]
+        .iter()
+        .map(|k| n(k))
+        .sum();
+        assert_eq!(
+            n("candidates"),
+            n("feasible") + rejected,
+            "region {name}: candidates != feasible + rejections: {r}"
+        );
+        assert!(n("used") <= n("feasible"), "region {name}: {r}");
+        used_total += n("used");
+    }
+    let r = rejections
+        .get(region)
+        .unwrap_or_else(|| panic!("no rejections.{region}"))
+        .clone();
+    assert_eq!(r["used"].as_u64(), Some(wanted as u64), "{r}");
+    assert_eq!(report["points"].as_u64(), Some(used_total));
+    r
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// (a) determinism
+
+#[test]
+fn thread_count_does_not_change_the_bytes_and_the_seed_does() {
+    let dir = TempDir::new().unwrap();
+    let text = small_paper(POINTS);
+    let one = run_ok(&dir, "one", &text, Some("1"));
+    let two = run_ok(&dir, "two", &text, Some("2"));
+    for file in ["measurements.csv", "truth.csv"] {
+        let a = read(&one.join(file));
+        assert!(!a.is_empty());
+        assert!(
+            a == read(&two.join(file)),
+            "{file} differs between --threads 1 and --threads 2"
+        );
+    }
+
+    let reseeded = run_ok(
+        &dir,
+        "reseeded",
+        &edit(&text, "seed = 2019", "seed = 2020"),
+        Some("2"),
+    );
+    for file in ["measurements.csv", "truth.csv"] {
+        assert!(
+            read(&one.join(file)) != read(&reseeded.join(file)),
+            "{file} does not depend on the seed"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// (b) bad inputs: one line, no panic, nothing written
+
+#[test]
+fn missing_urdf_is_one_line_and_writes_nothing() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(
+        &small_paper(POINTS),
+        "robots/iiwa7.urdf",
+        "robots/no_such_robot.urdf",
+    );
+    run_failing(&dir, "missing_urdf", &text, &["no_such_robot.urdf"]);
+}
+
+#[test]
+fn branching_urdf_is_refused() {
+    let dir = TempDir::new().unwrap();
+    let branching = edit(
+        IIWA_URDF,
+        "</robot>",
+        r#"  <joint name="extra_fixed_joint" type="fixed">
+    <parent link="iiwa_link_3"/>
+    <child link="extra_link"/>
+    <origin xyz="0 0.1 0" rpy="0 0 0"/>
+  </joint>
+  <link name="extra_link"/>
+</robot>"#,
+    );
+    let urdf = write(dir.path(), "branching.urdf", &branching);
+    let urdf = urdf.to_str().expect("temporary path is UTF-8");
+    let text = edit(&small_paper(POINTS), "robots/iiwa7.urdf", urdf);
+    run_failing(
+        &dir,
+        "branching",
+        &text,
+        &["iiwa_link_3", "extra_fixed_joint", "serial"],
+    );
+}
+
+#[test]
+fn unknown_key_names_the_key_and_the_line() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(
+        &small_paper(POINTS),
+        "[robot]\n",
+        "[robot]\ncolour = \"orange\"\n",
+    );
+    let line = line_of(&text, "colour");
+    run_failing(
+        &dir,
+        "unknown_key",
+        &text,
+        &["colour", &format!("line {line},")],
+    );
+}
+
+#[test]
+fn wrong_type_names_the_line() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(PAPER, "points = 2335", "points = \"many\"");
+    let line = line_of(&text, "points = \"many\"");
+    run_failing(
+        &dir,
+        "wrong_type",
+        &text,
+        &[&format!("line {line},"), "many"],
+    );
+}
+
+#[test]
+fn region_out_of_reach_is_named() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(
+        &small_paper(POINTS),
+        "name = \"paper\"\ncenter_m = [0.66, 0.0, 0.40]",
+        "name = \"far_away\"\ncenter_m = [3.66, 0.0, 0.40]",
+    );
+    run_failing(&dir, "far", &text, &["unreachable", "far_away"]);
+}
+
+#[test]
+fn missing_scenario_file_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let scenario = dir.path().join("no_such_scenario.toml");
+    let out = dir.path().join("out");
+    assert_clean_failure(
+        &run(&scenario, &out, None),
+        &out,
+        &["no_such_scenario.toml"],
+    );
+}
+
+#[test]
+fn zero_threads_is_refused() {
+    let dir = TempDir::new().unwrap();
+    let scenario = write(dir.path(), "s.toml", &small_paper(POINTS));
+    let out = dir.path().join("out");
+    assert_clean_failure(&run(&scenario, &out, Some("0")), &out, &["--threads"]);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// (c) rejection bookkeeping
+
+#[test]
+fn an_obstacle_in_the_region_rejects_points() {
+    let dir = TempDir::new().unwrap();
+    let table = r#"obstacles = [{ name = "table", center = [0.0, 0.0, -0.05], half_extents = [1.5, 1.5, 0.049] }]"#;
+    let text = small_paper(POINTS);
+
+    let free = run_ok(&dir, "free", &edit(&text, table, "obstacles = []"), None);
+    let r = check_bookkeeping(&campaign_json(&free), "paper", POINTS);
+    assert_eq!(r["environment_collision"], 0, "no obstacle, yet: {r}");
+
+    // A crate filling the lower part of the region (z 0.08..0.30 m of the region's 0.08..0.72 m).
+    let crate_box = r#"obstacles = [{ name = "crate", center = [0.66, 0.0, 0.15], half_extents = [0.3, 0.5, 0.15] }]"#;
+    let blocked = run_ok(&dir, "blocked", &edit(&text, table, crate_box), None);
+    let r = check_bookkeeping(&campaign_json(&blocked), "paper", POINTS);
+    assert!(
+        r["environment_collision"].as_u64().unwrap() > 0,
+        "the crate rejected nothing: {r}"
+    );
+}
+
+#[test]
+fn tracker_off_to_the_side_rejects_some_points_for_the_acceptance_cone() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(
+        &small_paper(POINTS),
+        "position_m = [3.0, 0.3, 1.75]",
+        "position_m = [2.5, 1.2, 1.75]",
+    );
+    let out = run_ok(&dir, "side", &text, None);
+    let r = check_bookkeeping(&campaign_json(&out), "paper", POINTS);
+    let sight = r["line_of_sight"].as_u64().unwrap() + r["acceptance_cone"].as_u64().unwrap();
+    assert!(sight > 0, "a tracker off to the side rejected nothing: {r}");
+}
+
+/// The count in front of `label` in an error message such as "... 12 hitting an obstacle, ...".
+fn count_before(message: &str, label: &str) -> u64 {
+    let at = message
+        .find(label)
+        .unwrap_or_else(|| panic!("{message:?} has no {label:?}"));
+    let number = message[..at].trim_end().rsplit([' ', '(']).next().unwrap();
+    number
+        .parse()
+        .unwrap_or_else(|_| panic!("no count before {label:?} in {message:?}"))
+}
+
+#[test]
+fn tracker_behind_the_robot_sees_nothing_and_says_why() {
+    let dir = TempDir::new().unwrap();
+    let text = edit(
+        &small_paper(POINTS),
+        "position_m = [3.0, 0.3, 1.75]",
+        "position_m = [-2.5, 0.0, 0.8]",
+    );
+    let message = run_failing(&dir, "behind", &text, &["unreachable", "'paper'"]);
+    let feasible = count_before(&message, &format!("of {POINTS} wanted"));
+    let candidates = count_before(&message, "candidates:");
+    let blocked = count_before(&message, "with the beam blocked");
+    let cone = count_before(&message, "outside the reflector's acceptance cone");
+    let rejected: u64 = [
+        "out of reach",
+        "at joint limits",
+        "in self-collision",
+        "hitting an obstacle",
+    ]
+    .iter()
+    .map(|l| count_before(&message, l))
+    .sum::<u64>()
+        + blocked
+        + cone;
+    assert!(feasible < POINTS as u64, "{message}");
+    assert!(blocked + cone > 0, "{message}");
+    assert_eq!(candidates, feasible + rejected, "{message}");
+    // With the robot between tracker and reflector, the beam is what fails, not the arm.
+    assert!(blocked + cone > candidates / 2, "{message}");
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// (d) the measurements hold no truth
+
+fn headers(path: &Path) -> Vec<String> {
+    let mut reader = csv::Reader::from_path(path).expect("open csv");
+    reader
+        .headers()
+        .expect("csv header")
+        .iter()
+        .map(String::from)
+        .collect()
+}
+
+fn expected_measurement_header(reflectors: usize) -> Vec<String> {
+    let mut h: Vec<String> = vec!["point_id".into(), "region".into()];
+    h.extend((1..=7).map(|j| format!("iiwa_joint_{j}")));
+    h.extend(
+        ["x", "y", "z", "qw", "qx", "qy", "qz"]
+            .iter()
+            .map(|a| format!("flange_{a}")),
+    );
+    for prefix in ["nom_", ""] {
+        for k in 1..=reflectors {
+            h.extend(["x", "y", "z"].iter().map(|a| format!("{prefix}{a}{k}")));
+        }
+    }
+    h
+}
+
+#[test]
+fn measurements_header_is_exact_and_holds_no_truth() {
+    let dir = TempDir::new().unwrap();
+    let pose = edit(PAPER_POSE, "points = 875", "points = 60");
+    for (name, text, reflectors) in [("point", small_paper(POINTS), 1), ("pose", pose, 3)] {
+        let out = run_ok(&dir, name, &text, None);
+        let header = headers(&out.join("measurements.csv"));
+        assert_eq!(header, expected_measurement_header(reflectors), "{name}");
+        assert!(
+            header.iter().all(|c| !c.to_lowercase().contains("true")),
+            "{name}: {header:?}"
+        );
+        // The truth is where it belongs.
+        let truth = headers(&out.join("truth.csv"));
+        assert!(truth.contains(&format!("true_x{reflectors}")), "{truth:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// (e) the tracker measured the true reflectors
+
+/// Column `name` of every row, as numbers.
+fn column(path: &Path, name: &str) -> Vec<f64> {
+    let mut reader = csv::Reader::from_path(path).expect("open csv");
+    let i = reader
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("{} has no column {name}", path.display()));
+    reader
+        .records()
+        .map(|r| r.expect("csv row")[i].parse().expect("a number"))
+        .collect()
+}
+
+fn points(path: &Path, prefix: &str, k: usize) -> Vec<Point3<f64>> {
+    let [x, y, z] = ["x", "y", "z"].map(|a| column(path, &format!("{prefix}{a}{k}")));
+    (0..x.len())
+        .map(|i| Point3::new(x[i], y[i], z[i]))
+        .collect()
+}
+
+#[test]
+fn measured_points_are_the_true_ones_seen_through_the_tracker() {
+    let dir = TempDir::new().unwrap();
+    let pose = edit(PAPER_POSE, "points = 875", "points = 60");
+    for (name, text, reflectors, rows) in [
+        ("point", small_paper(POINTS), 1, POINTS),
+        ("pose", pose, 3, 60),
+    ] {
+        let out = run_ok(&dir, name, &text, None);
+        let measurements = out.join("measurements.csv");
+        let truth = out.join("truth.csv");
+        assert_eq!(
+            column(&measurements, "point_id"),
+            column(&truth, "point_id"),
+            "{name}: the two files list different points"
+        );
+        let (mut measured, mut true_points, mut nominal) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 1..=reflectors {
+            measured.extend(points(&measurements, "", k));
+            true_points.extend(points(&truth, "true_", k));
+            nominal.extend(points(&measurements, "nom_", k));
+        }
+        assert_eq!(measured.len(), rows * reflectors, "{name}");
+
+        let fit = register_points(&true_points, &measured).expect("registration");
+        assert!(
+            (3e-6..60e-6).contains(&fit.rms),
+            "{name}: residual RMS {:.2} µm is not tracker noise",
+            fit.rms * 1e6
+        );
+        // The tracker stands 2-3 m away, turned by about 187° about z: not the identity.
+        assert!(fit.transform.translation.vector.norm() > 1.0, "{name}");
+
+        // And the nominal points are not the truth: the robot's errors are far above the tracker noise.
+        let nominal_fit = register_points(&nominal, &measured).expect("registration");
+        assert!(
+            nominal_fit.rms > 5.0 * fit.rms,
+            "{name}: nominal {:.2} µm vs true {:.2} µm",
+            nominal_fit.rms * 1e6,
+            fit.rms * 1e6
+        );
+    }
+}
