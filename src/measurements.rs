@@ -77,11 +77,13 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     csv_bytes(header, rows)
 }
 
-/// `point_id, true_x1…, true_flange_x…qz, true_<joint names>`: the pose the true arm reached (base frame).
+/// `point_id, true_x1…, trk_x1…, true_flange_x…qz, true_<joint names>`: the pose the true arm reached (base
+/// frame), and the true reflector positions in the tracker frame without tracker noise (`trk_*`).
 pub fn truth_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     let k = reflector_count(campaign);
     let mut header: Vec<String> = vec!["point_id".into()];
     header.extend(xyz_columns("true_", k));
+    header.extend(xyz_columns("trk_", k));
     header.extend(
         [
             "true_flange_x",
@@ -98,6 +100,7 @@ pub fn truth_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     let rows = campaign.points.iter().map(|p| {
         let mut row = vec![p.id.to_string()];
         row.extend(point_cells(&p.true_reflectors));
+        row.extend(point_cells(&p.true_in_tracker));
         row.extend(pose_cells(&p.true_flange));
         row.extend(p.q_true.iter().map(|q| q.to_string()));
         row

@@ -55,6 +55,9 @@ pub struct CampaignPoint {
     /// The pose the true arm reached for this measurement (repeatability noise included), base frame.
     pub true_flange: Isometry3<f64>,
     pub true_reflectors: Vec<Point3<f64>>,
+    /// The true reflector positions in the tracker's frame, without tracker noise: what a perfect tracker would
+    /// have measured. The evaluation maps them through the calibration's own registration.
+    pub true_in_tracker: Vec<Point3<f64>>,
     /// Link-side joint angles of the true arm (deflected, with noise).
     pub q_true: Vec<f64>,
 }
@@ -456,6 +459,10 @@ impl Setup<'_> {
             nominal_flange: plan.nominal_flange,
             measured,
             true_flange,
+            true_in_tracker: true_reflectors
+                .iter()
+                .map(|p| self.tracker.pose.inverse_transform_point(p))
+                .collect(),
             true_reflectors,
             q_true: work.state.q.clone(),
         })

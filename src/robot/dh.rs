@@ -34,7 +34,7 @@ pub struct DhRow {
 }
 
 /// A chain in DH form: `base · A_1(q_1) ⋯ A_n(q_n) · tool` is the flange pose.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct DhChain {
     /// Pose of DH frame 0 in the world frame.
     pub base: Isometry3<f64>,

@@ -1,0 +1,548 @@
+//! `calibrate --data FILE.csv [--robot URDF] [--method M] [--truth truth.csv] [--out DIR]`: fits a calibration
+//! method on measured data, prints the paper's Table 1 (and Table 2 with a reflector nest) for the test split,
+//! and writes `report.json`, `model.json` and `predictions.csv`.
+//!
+//! `calibrate apply --model model.json --data FILE.csv [--out FILE]`: predicted poses and corrected joint
+//! commands for new joint configurations.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::{Args, Parser, Subcommand};
+use nalgebra::{Point3, UnitQuaternion};
+use serde::Serialize;
+use serde_json::json;
+
+use calibench::calib::error_model::ErrorModelKind;
+use calibench::calib::paper::{Observation, PaperModel};
+use calibench::calib::regression::{RegressionOptions, r2};
+use calibench::dataset::{Dataset, Split, Truth, random_split};
+use calibench::eval::Stats;
+use calibench::robot::dh::DhChain;
+use calibench::robot::urdf;
+use calibench::{Error, Result, output};
+
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    about = "Calibrate a robot from laser-tracker measurements",
+    args_conflicts_with_subcommands = true
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    fit: FitArgs,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Predict poses and corrected joint commands for new configurations with a saved model.
+    Apply(ApplyArgs),
+}
+
+#[derive(Args, Debug)]
+struct FitArgs {
+    /// Measurements (the `measurements.csv` format; see results/README.md).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// The robot's URDF; its joint names name the joint columns.
+    #[arg(long, default_value = "robots/iiwa7.urdf")]
+    robot: PathBuf,
+    /// The link carrying the reflectors [default: the chain's last link].
+    #[arg(long)]
+    flange_link: Option<String>,
+    /// nominal | paper-rotz | paper-rotxyz | paper-rotxyz-transxyz
+    #[arg(long, default_value = "paper-rotxyz")]
+    method: String,
+    /// Ground truth (`truth.csv` of a simulated campaign) to evaluate against.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "results/calibrate")]
+    out: PathBuf,
+    /// Train, validation and test fractions, used when the data has no `split` column.
+    #[arg(long, value_delimiter = ',', default_value = "0.5,0.25,0.25")]
+    split: Vec<f64>,
+    /// Seed of the random split.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Highest polynomial degree the regression may choose.
+    #[arg(long, default_value_t = 5)]
+    max_degree: usize,
+    /// Add pairwise products of the inputs to the polynomial features (eq. 18 has none).
+    #[arg(long)]
+    cross_terms: bool,
+}
+
+#[derive(Args, Debug)]
+struct ApplyArgs {
+    /// A `model.json` written by `calibrate`.
+    #[arg(long)]
+    model: PathBuf,
+    /// Joint configurations: a CSV with one column per joint of the model (extra columns are ignored).
+    #[arg(long)]
+    data: PathBuf,
+    /// Output CSV.
+    #[arg(long, default_value = "results/calibrate/applied.csv")]
+    out: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Some(Command::Apply(args)) => apply(args),
+        None => fit(&cli.fit),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn parse_method(name: &str) -> Result<Option<ErrorModelKind>> {
+    Ok(match name {
+        "nominal" => None,
+        "paper-rotz" => Some(ErrorModelKind::RotZ),
+        "paper-rotxyz" => Some(ErrorModelKind::RotXyz),
+        "paper-rotxyz-transxyz" => Some(ErrorModelKind::RotXyzTransXyz),
+        other => {
+            return Err(Error::Invalid(format!(
+                "unknown method '{other}'; choose nominal, paper-rotz, paper-rotxyz or paper-rotxyz-transxyz"
+            )));
+        }
+    })
+}
+
+/// Distance statistics in millimetres, as `report.json` names them.
+#[derive(Serialize)]
+struct MmStats {
+    n: usize,
+    mean_mm: f64,
+    max_mm: f64,
+    std_mm: f64,
+    rms_mm: f64,
+    p95_mm: f64,
+}
+
+/// Angle statistics in radians.
+#[derive(Serialize)]
+struct RadStats {
+    n: usize,
+    mean_rad: f64,
+    max_rad: f64,
+    std_rad: f64,
+    rms_rad: f64,
+    p95_rad: f64,
+}
+
+fn stats_of(values: &[f64]) -> Result<Stats> {
+    Stats::of(values).ok_or_else(|| Error::Invalid("no finite errors to summarize".into()))
+}
+
+fn mm(values: &[f64]) -> Result<MmStats> {
+    let s = stats_of(values)?.scaled(1e3);
+    Ok(MmStats {
+        n: s.n,
+        mean_mm: s.mean,
+        max_mm: s.max,
+        std_mm: s.std,
+        rms_mm: s.rms,
+        p95_mm: s.p95,
+    })
+}
+
+fn rad(values: &[f64]) -> Result<RadStats> {
+    let s = stats_of(values)?;
+    Ok(RadStats {
+        n: s.n,
+        mean_rad: s.mean,
+        max_rad: s.max,
+        std_rad: s.std,
+        rms_rad: s.rms,
+        p95_rad: s.p95,
+    })
+}
+
+/// Errors of the nominal model ("before") and of the fitted one ("after") against observations.
+struct Errors {
+    before: Vec<f64>,
+    after: Vec<f64>,
+    linearized: Vec<f64>,
+    orientation_before: Vec<f64>,
+    orientation_after: Vec<f64>,
+}
+
+fn errors(model: &PaperModel, observations: &[Observation]) -> Errors {
+    let mut e = Errors {
+        before: Vec::new(),
+        after: Vec::new(),
+        linearized: Vec::new(),
+        orientation_before: Vec::new(),
+        orientation_after: Vec::new(),
+    };
+    for o in observations {
+        let (nominal_p, nominal_r) = model.nominal(&o.q);
+        let pred = model.predict(&o.q);
+        e.before.push((o.position - nominal_p).norm());
+        e.after.push((o.position - pred.position).norm());
+        e.linearized
+            .push((o.position - pred.linearized_position).norm());
+        if let Some(measured) = o.orientation {
+            e.orientation_before.push(measured.angle_to(&nominal_r));
+            e.orientation_after
+                .push(measured.angle_to(&pred.orientation));
+        }
+    }
+    e
+}
+
+fn errors_json(e: &Errors) -> Result<serde_json::Value> {
+    let mut v = json!({ "before": mm(&e.before)?, "after": mm(&e.after)? });
+    // The linearized prediction (eq. 10) is reported when it differs from the full one by more than a micrometre.
+    let gap = e
+        .after
+        .iter()
+        .zip(&e.linearized)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    if gap > 1e-6 {
+        v["after_linearized"] = serde_json::to_value(mm(&e.linearized)?).expect("plain numbers");
+    }
+    if !e.orientation_before.is_empty() {
+        v["orientation"] =
+            json!({ "before": rad(&e.orientation_before)?, "after": rad(&e.orientation_after)? });
+    }
+    Ok(v)
+}
+
+fn fit(args: &FitArgs) -> Result<()> {
+    let data_path = args.data.as_ref().ok_or_else(|| {
+        Error::Invalid("--data FILE.csv is required (or use `calibrate apply`)".into())
+    })?;
+    let kind = parse_method(&args.method)?;
+    let chain = urdf::load_file(&args.robot, args.flange_link.as_deref())?;
+    let dh = DhChain::from_chain(&chain)?;
+    let data = Dataset::read(data_path, &chain.joint_names())?;
+    let truth = match &args.truth {
+        Some(path) => Some(Truth::read(path)?.aligned_to(&data)?),
+        None => None,
+    };
+    let labels = match &data.split {
+        Some(labels) => labels.clone(),
+        None => {
+            let f: [f64; 3] = args.split.as_slice().try_into().map_err(|_| {
+                Error::Invalid(format!(
+                    "--split needs three fractions (train,val,test), got {}",
+                    args.split.len()
+                ))
+            })?;
+            random_split(data.len(), f, args.seed)?
+        }
+    };
+    let indices =
+        |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
+    let (i_train, i_val, i_test) = (
+        indices(Split::Train),
+        indices(Split::Val),
+        indices(Split::Test),
+    );
+    if i_test.is_empty() {
+        return Err(Error::Invalid("the test split is empty".into()));
+    }
+    let (train, val, test) = (
+        data.subset(&i_train),
+        data.subset(&i_val),
+        data.subset(&i_test),
+    );
+    let options = RegressionOptions {
+        max_degree: args.max_degree,
+        cross_terms: args.cross_terms,
+        ..RegressionOptions::default()
+    };
+
+    let started = Instant::now();
+    let model = PaperModel::fit(
+        kind,
+        &dh,
+        (&chain.lower_limits(), &chain.upper_limits()),
+        &train,
+        &val,
+        &options,
+    )?;
+    let fit_ms = started.elapsed().as_secs_f64() * 1e3;
+
+    let obs_test = model.observe(&test)?;
+    let test_errors = errors(&model, &obs_test);
+    let mut report = json!({
+        "method": model.method,
+        "data": data_path.display().to_string(),
+        "robot": args.robot.display().to_string(),
+        "n_train": train.len(),
+        "n_val": val.len(),
+        "n_test": test.len(),
+        "fit_ms": fit_ms,
+        "registration": {
+            "tracker_to_base": model.frame.tracker_to_base,
+            "mounting_m": model.frame.mounting,
+            "rms_mm": model.frame.rms * 1e3,
+        },
+        "kept_parameters": {
+            "position": model.position.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
+            "orientation": model.orientation.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
+        },
+        "r2": r2_report(&model, &obs_test),
+        "test": errors_json(&test_errors)?,
+    });
+    let truth_errors = match &truth {
+        Some(t) => {
+            let t_test = t.subset(&i_test);
+            let obs_truth = model.observe_points(&test.q, &t_test.in_tracker)?;
+            let e = errors(&model, &obs_truth);
+            report["truth"] = errors_json(&e)?;
+            Some(e)
+        }
+        None => None,
+    };
+
+    let predictions = predictions_csv(&model, &data, &labels)?;
+    output::write_files(
+        &args.out,
+        &[
+            ("report.json", to_json(&report)?),
+            ("model.json", to_json(&model)?),
+            ("predictions.csv", predictions),
+        ],
+    )?;
+
+    print_tables(&model.method, &test_errors, truth_errors.as_ref())?;
+    println!(
+        "fit on {} training + {} validation points in {fit_ms:.1} ms; wrote {}",
+        train.len(),
+        val.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
+}
+
+/// R² of each modelled parameter on the test split (eq. 20): the identified values against the modelled ones.
+fn r2_report(model: &PaperModel, observations: &[Observation]) -> serde_json::Value {
+    let pos: Vec<_> = model.position.iter().map(|m| m.param).collect();
+    let ori: Vec<_> = model.orientation.iter().map(|m| m.param).collect();
+    let id = model.identify(observations, &pos, &ori);
+    let modelled: Vec<(Vec<f64>, Vec<f64>)> = observations
+        .iter()
+        .map(|o| model.parameters(&o.q))
+        .collect();
+    let mut out = serde_json::Map::new();
+    let groups = [
+        (&model.position, &id.position, 0),
+        (&model.orientation, &id.orientation, 1),
+    ];
+    for (models, identified, group) in groups {
+        for (k, m) in models.iter().enumerate() {
+            let y: Vec<f64> = identified.iter().map(|row| row[k]).collect();
+            let y_hat: Vec<f64> = modelled
+                .iter()
+                .map(|(p, o)| if group == 0 { p[k] } else { o[k] })
+                .collect();
+            let test = (!y.is_empty()).then(|| r2(&y, &y_hat));
+            out.insert(
+                m.name.clone(),
+                json!({ "validation": m.model.validation_r2, "test": test }),
+            );
+        }
+    }
+    serde_json::Value::Object(out)
+}
+
+fn predictions_csv(model: &PaperModel, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
+    let observations = model.observe(data)?;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let csv_err = |e: csv::Error| Error::Invalid(format!("predictions.csv: {e}"));
+    let mut header = vec![
+        "point_id",
+        "split",
+        "measured_x",
+        "measured_y",
+        "measured_z",
+        "nominal_x",
+        "nominal_y",
+        "nominal_z",
+        "predicted_x",
+        "predicted_y",
+        "predicted_z",
+        "error_before_mm",
+        "error_after_mm",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect::<Vec<_>>();
+    let with_orientation = model.nest.is_some();
+    if with_orientation {
+        header.extend(
+            [
+                "predicted_qw",
+                "predicted_qx",
+                "predicted_qy",
+                "predicted_qz",
+                "orientation_before_rad",
+                "orientation_after_rad",
+            ]
+            .map(String::from),
+        );
+    }
+    w.write_record(&header).map_err(csv_err)?;
+    for ((id, o), label) in data.point_ids.iter().zip(&observations).zip(labels) {
+        let (np, nr) = model.nominal(&o.q);
+        let p = model.predict(&o.q);
+        let mut row = vec![id.clone(), format!("{label:?}").to_lowercase()];
+        for v in [o.position.coords, np.coords, p.position.coords] {
+            row.extend(v.iter().map(|x| x.to_string()));
+        }
+        row.push(((o.position - np).norm() * 1e3).to_string());
+        row.push(((o.position - p.position).norm() * 1e3).to_string());
+        if with_orientation {
+            let q = p.orientation.quaternion();
+            row.extend([q.w, q.i, q.j, q.k].map(|v| v.to_string()));
+            let m = o.orientation.unwrap_or(nr);
+            row.push(m.angle_to(&nr).to_string());
+            row.push(m.angle_to(&p.orientation).to_string());
+        }
+        w.write_record(&row).map_err(csv_err)?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
+}
+
+fn print_tables(method: &str, test: &Errors, truth: Option<&Errors>) -> Result<()> {
+    let table =
+        |title: &str, unit: &str, before: &[f64], after: &[f64], scale: f64| -> Result<()> {
+            let (b, a) = (
+                stats_of(before)?.scaled(scale),
+                stats_of(after)?.scaled(scale),
+            );
+            println!("{title} ({unit}), n = {}", b.n);
+            println!("  {:<6} {:>10} {:>22}", "Error", "Measured", method);
+            for (name, x, y) in [
+                ("mean", b.mean, a.mean),
+                ("max", b.max, a.max),
+                ("std", b.std, a.std),
+                ("rms", b.rms, a.rms),
+                ("p95", b.p95, a.p95),
+            ] {
+                println!("  {name:<6} {x:>10.4} {y:>22.4}");
+            }
+            Ok(())
+        };
+    table(
+        "Table 1. Positional errors on the test split",
+        "mm",
+        &test.before,
+        &test.after,
+        1e3,
+    )?;
+    if !test.orientation_before.is_empty() {
+        table(
+            "Table 2. Orientational errors on the test split",
+            "rad",
+            &test.orientation_before,
+            &test.orientation_after,
+            1.0,
+        )?;
+    }
+    if let Some(t) = truth {
+        table(
+            "Against the truth: positional errors on the test split",
+            "mm",
+            &t.before,
+            &t.after,
+            1e3,
+        )?;
+        if !t.orientation_before.is_empty() {
+            table(
+                "Against the truth: orientational errors on the test split",
+                "rad",
+                &t.orientation_before,
+                &t.orientation_after,
+                1.0,
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn apply(args: &ApplyArgs) -> Result<()> {
+    let text = std::fs::read_to_string(&args.model).map_err(|e| Error::Data {
+        origin: args.model.display().to_string(),
+        message: format!("cannot read: {e}"),
+    })?;
+    let model: PaperModel = serde_json::from_str(&text).map_err(|e| Error::Data {
+        origin: args.model.display().to_string(),
+        message: format!("not a calibrate model: {e}"),
+    })?;
+    let (ids, configurations) = calibench::dataset::read_joints(&args.data, &model.joint_names)?;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", args.out.display()));
+    let mut header: Vec<String> = vec!["point_id".into()];
+    header.extend(model.joint_names.iter().cloned());
+    header.extend(
+        [
+            "predicted_x",
+            "predicted_y",
+            "predicted_z",
+            "predicted_qw",
+            "predicted_qx",
+            "predicted_qy",
+            "predicted_qz",
+        ]
+        .map(String::from),
+    );
+    header.extend(model.joint_names.iter().map(|n| format!("cmd_{n}")));
+    header.push("compensation_residual_m".into());
+    w.write_record(&header).map_err(csv_err)?;
+    for (id, q) in ids.iter().zip(&configurations) {
+        let p = model.predict(q);
+        let (command, residual) = model.compensate(q)?;
+        let r: UnitQuaternion<f64> = p.orientation;
+        let pos: Point3<f64> = p.position;
+        let mut row = vec![id.clone()];
+        row.extend(q.iter().map(|v| v.to_string()));
+        row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
+        row.extend(command.iter().map(|v| v.to_string()));
+        row.push(residual.to_string());
+        w.write_record(&row).map_err(csv_err)?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| Error::Invalid(format!("{}: {e}", args.out.display())))?;
+    let (dir, name) = split_path(&args.out)?;
+    output::write_files(dir, &[(name, bytes)])?;
+    println!(
+        "{} configurations: predicted poses and corrected commands in {}",
+        ids.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn split_path(path: &Path) -> Result<(&Path, &str)> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| Error::Invalid(format!("--out {} is not a file name", path.display())))?;
+    Ok((
+        path.parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new(".")),
+        name,
+    ))
+}

@@ -1,0 +1,750 @@
+//! The `calibrate` binary end to end on small simulated campaigns: the documented fields of `report.json`,
+//! the tables on stdout, a `split` column in the data, the save / load / apply round trip, one-line errors
+//! that leave nothing behind, and byte-identical output across runs.
+//!
+//! Campaigns come from the `campaign` binary on the shipped paper scenarios with a small point count,
+//! written to a temporary directory; both binaries run from the crate root so `robots/iiwa7.urdf` resolves.
+
+use std::collections::HashMap;
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+use tempfile::TempDir;
+
+const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
+const PAPER_POSE: &str = include_str!("../scenarios/paper_iiwa_pose.toml");
+const POINTS: usize = 300;
+const POSE_POINTS: usize = 200;
+
+/// `text` with `from` replaced by `to`, which must occur exactly once.
+fn edit(text: &str, from: &str, to: &str) -> String {
+    assert_eq!(
+        text.matches(from).count(),
+        1,
+        "expected exactly one `{from}` in the scenario"
+    );
+    text.replacen(from, to, 1)
+}
+
+fn small_paper(points: usize) -> String {
+    edit(PAPER, "points = 2335", &format!("points = {points}"))
+}
+
+fn small_pose(points: usize) -> String {
+    edit(PAPER_POSE, "points = 875", &format!("points = {points}"))
+}
+
+fn run_bin(bin: &str, args: &[&OsStr]) -> Output {
+    Command::new(bin)
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap_or_else(|e| panic!("{bin} starts: {e}"))
+}
+
+/// Runs the campaign binary on scenario `text`; returns the directory with measurements.csv and truth.csv.
+fn campaign(dir: &TempDir, name: &str, text: &str) -> PathBuf {
+    let scenario = dir.path().join(format!("{name}.toml"));
+    std::fs::write(&scenario, text).expect("write the scenario");
+    let out = dir.path().join(format!("campaign_{name}"));
+    let output = run_bin(
+        env!("CARGO_BIN_EXE_campaign"),
+        &[scenario.as_os_str(), "--out".as_ref(), out.as_os_str()],
+    );
+    assert!(
+        output.status.success(),
+        "campaign {name} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    out
+}
+
+fn calibrate(args: &[&OsStr]) -> Output {
+    run_bin(env!("CARGO_BIN_EXE_calibrate"), args)
+}
+
+/// `calibrate --data DATA --out OUT` plus `extra`; must succeed. Returns stdout.
+fn fit_ok(data: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args: Vec<&OsStr> = vec![
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ];
+    args.extend(extra.iter().map(OsStr::new));
+    let output = calibrate(&args);
+    assert!(
+        output.status.success(),
+        "calibrate {args:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout).expect("stdout is UTF-8")
+}
+
+fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
+}
+
+fn json(path: &Path) -> Value {
+    serde_json::from_slice(&read(path))
+        .unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
+}
+
+/// A CSV file as its header and rows of strings.
+struct Csv {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Csv {
+    fn read(path: &Path) -> Csv {
+        let mut reader =
+            csv::Reader::from_path(path).unwrap_or_else(|e| panic!("open {}: {e}", path.display()));
+        let header = reader
+            .headers()
+            .expect("a header")
+            .iter()
+            .map(String::from)
+            .collect();
+        let rows = reader
+            .records()
+            .map(|r| r.expect("a CSV record").iter().map(String::from).collect())
+            .collect();
+        Csv { header, rows }
+    }
+
+    fn write(&self, path: &Path) {
+        let mut w = csv::Writer::from_path(path).expect("create a CSV");
+        w.write_record(&self.header).expect("write the header");
+        for row in &self.rows {
+            w.write_record(row).expect("write a row");
+        }
+        w.flush().expect("flush the CSV");
+    }
+
+    fn col(&self, name: &str) -> usize {
+        self.header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no column {name} in {:?}", self.header))
+    }
+
+    /// Rows by `point_id`.
+    fn by_id(&self) -> HashMap<String, Vec<String>> {
+        let id = self.col("point_id");
+        let map: HashMap<_, _> = self
+            .rows
+            .iter()
+            .map(|r| (r[id].clone(), r.clone()))
+            .collect();
+        assert_eq!(map.len(), self.rows.len(), "point_ids are not unique");
+        map
+    }
+}
+
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .map(|e| e.expect("directory entry").path())
+        .flat_map(|p| if p.is_dir() { files_under(&p) } else { vec![p] })
+        .collect()
+}
+
+/// A failed run: non-zero exit, exactly one non-empty `error:` line on stderr containing every `needles`
+/// entry, no panic, and no file under `out`. Returns the line.
+fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> String {
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        !output.status.success(),
+        "expected a failure, got success; stdout: {}",
+        String::from_utf8_lossy(&output.stdout)
+    );
+    assert!(
+        !stderr.contains("panicked"),
+        "the binary panicked: {stderr}"
+    );
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "stderr must be exactly one line: {stderr:?}"
+    );
+    let line = lines[0];
+    assert!(
+        line.starts_with("error: ") && line.len() > "error: ".len(),
+        "stderr must be a non-empty `error:` line: {line:?}"
+    );
+    for needle in needles {
+        assert!(
+            line.contains(needle),
+            "{line:?} does not mention {needle:?}"
+        );
+    }
+    let left = files_under(out);
+    assert!(left.is_empty(), "a failed run left files behind: {left:?}");
+    line.to_string()
+}
+
+/// `calibrate --data DATA --out OUT` plus `extra`, which must fail cleanly (see [`assert_clean_failure`]).
+fn fit_fails(data: &Path, out: &Path, extra: &[&str], needles: &[&str]) -> String {
+    let mut args: Vec<&OsStr> = vec![
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ];
+    args.extend(extra.iter().map(OsStr::new));
+    assert_clean_failure(&calibrate(&args), out, needles)
+}
+
+fn num(v: &Value, what: &str) -> f64 {
+    v.as_f64()
+        .unwrap_or_else(|| panic!("{what} is not a number: {v}"))
+}
+
+fn count(report: &Value, key: &str) -> usize {
+    report[key]
+        .as_u64()
+        .unwrap_or_else(|| panic!("{key} is not a count: {}", report[key])) as usize
+}
+
+/// Error statistics with `unit` ("mm" or "rad"): every field present, finite, non-negative and consistent.
+fn check_stats(v: &Value, unit: &str, what: &str) {
+    let field = |name: &str| {
+        let x = num(
+            &v[format!("{name}_{unit}")],
+            &format!("{what}.{name}_{unit}"),
+        );
+        assert!(x.is_finite() && x >= 0.0, "{what}.{name}_{unit} = {x}");
+        x
+    };
+    let (mean, max, std, rms, p95) = (
+        field("mean"),
+        field("max"),
+        field("std"),
+        field("rms"),
+        field("p95"),
+    );
+    assert!(
+        mean <= max && p95 <= max && rms <= max,
+        "{what}: mean, p95 and rms must not exceed max: {v}"
+    );
+    assert!(rms >= mean - 1e-12, "{what}: rms below mean: {v}");
+    assert!(
+        (rms * rms - (mean * mean + std * std)).abs() <= 1e-6 * rms * rms + 1e-300,
+        "{what}: rms² ≠ mean² + std²: {v}"
+    );
+}
+
+fn check_before_after(v: &Value, unit: &str, what: &str) {
+    check_stats(&v["before"], unit, &format!("{what}.before"));
+    check_stats(&v["after"], unit, &format!("{what}.after"));
+}
+
+/// The counts of a 50/25/25 split of `n` points, each within one of its share.
+fn check_random_split(report: &Value, n: usize) {
+    let (train, val, test) = (
+        count(report, "n_train"),
+        count(report, "n_val"),
+        count(report, "n_test"),
+    );
+    assert_eq!(
+        train + val + test,
+        n,
+        "split counts {train}/{val}/{test} do not add up to {n}"
+    );
+    for (got, share) in [(train, 0.5), (val, 0.25), (test, 0.25)] {
+        let want = n as f64 * share;
+        assert!(
+            (got as f64 - want).abs() <= 1.0,
+            "split {train}/{val}/{test} is not 50/25/25 of {n} ±1"
+        );
+    }
+}
+
+fn names(v: &Value, what: &str) -> Vec<String> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("{what} is not an array: {v}"))
+        .iter()
+        .map(|s| {
+            s.as_str()
+                .unwrap_or_else(|| panic!("{what}: {s} is not a name"))
+                .to_string()
+        })
+        .collect()
+}
+
+/// The fields every fit's report has; returns the kept position parameters.
+fn check_report(report: &Value, method: &str, n: usize) -> Vec<String> {
+    assert_eq!(report["method"], method, "report.method");
+    check_random_split(report, n);
+    assert!(
+        num(&report["fit_ms"], "fit_ms") >= 0.0,
+        "fit_ms is negative"
+    );
+    check_before_after(&report["test"], "mm", "test");
+    let position = names(
+        &report["kept_parameters"]["position"],
+        "kept_parameters.position",
+    );
+    let orientation = names(
+        &report["kept_parameters"]["orientation"],
+        "kept_parameters.orientation",
+    );
+    let r2 = report["r2"]
+        .as_object()
+        .unwrap_or_else(|| panic!("r2 is not an object: {}", report["r2"]));
+    for name in position.iter().chain(&orientation) {
+        let entry = r2
+            .get(name)
+            .unwrap_or_else(|| panic!("no r2 for kept parameter {name}: {r2:?}"));
+        num(&entry["validation"], &format!("r2.{name}.validation"));
+        num(&entry["test"], &format!("r2.{name}.test"));
+    }
+    assert_eq!(
+        r2.len(),
+        position.len() + orientation.len(),
+        "r2 has entries for parameters not kept: {r2:?}"
+    );
+    position
+}
+
+#[test]
+fn report_has_the_documented_fields_and_the_papers_parameter_counts() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(POINTS));
+    for (method, kept) in [
+        ("paper-rotxyz", 17),
+        ("paper-rotz", 5),
+        ("paper-rotxyz-transxyz", 38),
+    ] {
+        let out = dir.path().join(method);
+        let stdout = fit_ok(&data.join("measurements.csv"), &out, &["--method", method]);
+        assert!(
+            stdout.contains("Table 1"),
+            "{method}: no Table 1 on stdout:\n{stdout}"
+        );
+        assert!(
+            !stdout.contains("Table 2"),
+            "{method}: Table 2 without a nest:\n{stdout}"
+        );
+        let report = json(&out.join("report.json"));
+        let position = check_report(&report, method, POINTS);
+        assert_eq!(
+            position.len(),
+            kept,
+            "{method}: kept position parameters {position:?}"
+        );
+        assert!(
+            report["kept_parameters"]["orientation"]
+                .as_array()
+                .is_some_and(Vec::is_empty),
+            "{method}: orientation parameters kept without a nest: {}",
+            report["kept_parameters"]
+        );
+        assert!(
+            report.get("truth").is_none(),
+            "{method}: a truth section without --truth"
+        );
+        assert!(
+            report["test"].get("orientation").is_none(),
+            "{method}: orientation errors without a nest"
+        );
+        let (before, after) = (
+            num(&report["test"]["before"]["rms_mm"], "before"),
+            num(&report["test"]["after"]["rms_mm"], "after"),
+        );
+        assert!(
+            after < before,
+            "{method}: calibration did not reduce the test rms ({before} → {after} mm)"
+        );
+        for name in ["model.json", "predictions.csv"] {
+            assert!(out.join(name).is_file(), "{method}: no {name}");
+        }
+        let predictions = Csv::read(&out.join("predictions.csv"));
+        assert_eq!(
+            predictions.rows.len(),
+            POINTS,
+            "{method}: predictions.csv rows"
+        );
+    }
+}
+
+#[test]
+fn truth_adds_a_truth_section() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(POINTS));
+    let out = dir.path().join("out");
+    let truth = data.join("truth.csv");
+    let stdout = fit_ok(
+        &data.join("measurements.csv"),
+        &out,
+        &["--truth", truth.to_str().unwrap()],
+    );
+    assert!(
+        stdout.contains("Table 1"),
+        "no Table 1 on stdout:\n{stdout}"
+    );
+    let report = json(&out.join("report.json"));
+    check_report(&report, "paper-rotxyz", POINTS);
+    check_before_after(&report["truth"], "mm", "truth");
+    assert!(
+        num(&report["truth"]["after"]["mean_mm"], "truth.after")
+            < num(&report["truth"]["before"]["mean_mm"], "truth.before"),
+        "calibration did not bring the test points closer to the truth: {}",
+        report["truth"]
+    );
+}
+
+#[test]
+fn nest_reports_orientation_and_prints_table_2() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "pose", &small_pose(POSE_POINTS));
+    let out = dir.path().join("out");
+    let truth = data.join("truth.csv");
+    let stdout = fit_ok(
+        &data.join("measurements.csv"),
+        &out,
+        &["--truth", truth.to_str().unwrap()],
+    );
+    assert!(
+        stdout.contains("Table 1"),
+        "no Table 1 on stdout:\n{stdout}"
+    );
+    assert!(
+        stdout.contains("Table 2"),
+        "no Table 2 on stdout with a nest:\n{stdout}"
+    );
+    let report = json(&out.join("report.json"));
+    let position = check_report(&report, "paper-rotxyz", POSE_POINTS);
+    assert_eq!(position.len(), 17, "kept position parameters {position:?}");
+    for section in ["test", "truth"] {
+        check_before_after(&report[section], "mm", section);
+        let orientation = &report[section]["orientation"];
+        check_before_after(orientation, "rad", &format!("{section}.orientation"));
+        let (before, after) = (
+            num(&orientation["before"]["mean_rad"], "before"),
+            num(&orientation["after"]["mean_rad"], "after"),
+        );
+        assert!(
+            after < before,
+            "{section}: orientation error not reduced ({before} → {after} rad)"
+        );
+    }
+    let predictions = Csv::read(&out.join("predictions.csv"));
+    for name in [
+        "predicted_qw",
+        "predicted_qx",
+        "predicted_qy",
+        "predicted_qz",
+        "orientation_after_rad",
+    ] {
+        predictions.col(name);
+    }
+}
+
+#[test]
+fn a_split_column_is_honoured() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(POINTS));
+    let mut table = Csv::read(&data.join("measurements.csv"));
+    assert_eq!(table.rows.len(), POINTS);
+    // Not the default 50/25/25, so a random split cannot pass by accident.
+    let (n_train, n_val) = (POINTS / 2, 90);
+    let n_test = POINTS - n_train - n_val;
+    table.header.push("split".into());
+    for (i, row) in table.rows.iter_mut().enumerate() {
+        row.push(
+            match i {
+                i if i < n_train => "train",
+                i if i < n_train + n_val => "val",
+                _ => "test",
+            }
+            .into(),
+        );
+    }
+    let with_split = dir.path().join("with_split.csv");
+    table.write(&with_split);
+    let out = dir.path().join("out");
+    // --split applies only without a split column.
+    fit_ok(
+        &with_split,
+        &out,
+        &["--split", "0.8,0.1,0.1", "--seed", "7"],
+    );
+    let report = json(&out.join("report.json"));
+    assert_eq!(
+        (
+            count(&report, "n_train"),
+            count(&report, "n_val"),
+            count(&report, "n_test")
+        ),
+        (n_train, n_val, n_test),
+        "the split column was not honoured"
+    );
+    let given = table.by_id();
+    let split = table.col("split");
+    let predictions = Csv::read(&out.join("predictions.csv"));
+    let (id, label) = (predictions.col("point_id"), predictions.col("split"));
+    assert_eq!(predictions.rows.len(), POINTS);
+    for row in &predictions.rows {
+        assert_eq!(
+            row[label], given[&row[id]][split],
+            "point {}: split in predictions.csv",
+            row[id]
+        );
+    }
+}
+
+/// Fits `data` into `out`, applies the model to the same file, and checks that the predicted positions (and
+/// with `orientation` the quaternions) equal predictions.csv's bit for bit, and that the corrected commands
+/// are close to the input with a negligible residual. Returns the largest command change (rad).
+fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
+    let out = dir.path().join("fit");
+    fit_ok(data, &out, &[]);
+    let model = out.join("model.json");
+    let apply_dir = dir.path().join("apply");
+    let applied = apply_dir.join("applied.csv");
+    let output = calibrate(&[
+        "apply".as_ref(),
+        "--model".as_ref(),
+        model.as_os_str(),
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        applied.as_os_str(),
+    ]);
+    assert!(
+        output.status.success(),
+        "apply failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_eq!(
+        files_under(&apply_dir),
+        vec![applied.clone()],
+        "apply wrote other files"
+    );
+
+    let predictions_csv = Csv::read(&out.join("predictions.csv"));
+    let predictions = predictions_csv.by_id();
+    let input = Csv::read(data);
+    let input_rows = input.by_id();
+    let applied = Csv::read(&applied);
+    assert_eq!(applied.rows.len(), input.rows.len(), "applied.csv rows");
+    let mut compared = vec!["predicted_x", "predicted_y", "predicted_z"];
+    if orientation {
+        compared.extend([
+            "predicted_qw",
+            "predicted_qx",
+            "predicted_qy",
+            "predicted_qz",
+        ]);
+    }
+    let id = applied.col("point_id");
+    let joints: Vec<String> = (1..=7).map(|k| format!("iiwa_joint_{k}")).collect();
+    let residual = applied.col("compensation_residual_m");
+    let mut mismatches = Vec::new();
+    let mut largest_change = 0.0_f64;
+    for row in &applied.rows {
+        let point = &row[id];
+        let expected = predictions
+            .get(point)
+            .unwrap_or_else(|| panic!("point {point} not in predictions.csv"));
+        for name in &compared {
+            let (got, want) = (
+                &row[applied.col(name)],
+                &expected[predictions_csv.col(name)],
+            );
+            let (g, w): (f64, f64) = (got.parse().unwrap(), want.parse().unwrap());
+            if g.to_bits() != w.to_bits() {
+                mismatches.push(format!("point {point} {name}: apply {got} vs fit {want}"));
+            }
+        }
+        for joint in &joints {
+            let q: f64 = input_rows[point][input.col(joint)].parse().unwrap();
+            let echoed: f64 = row[applied.col(joint)].parse().unwrap();
+            assert_eq!(
+                echoed.to_bits(),
+                q.to_bits(),
+                "point {point} {joint}: input not echoed"
+            );
+            let cmd: f64 = row[applied.col(&format!("cmd_{joint}"))].parse().unwrap();
+            assert!(cmd.is_finite(), "point {point} cmd_{joint} = {cmd}");
+            largest_change = largest_change.max((cmd - q).abs());
+        }
+        let r: f64 = row[residual].parse().unwrap();
+        assert!(
+            (0.0..=1e-9).contains(&r),
+            "point {point}: compensation residual {r} m"
+        );
+    }
+    assert!(
+        mismatches.is_empty(),
+        "{} of {} values differ between `apply` with the saved model and the fit's predictions.csv, e.g. {:?}",
+        mismatches.len(),
+        applied.rows.len() * compared.len(),
+        &mismatches[..mismatches.len().min(3)]
+    );
+    assert!(
+        largest_change > 0.0,
+        "the corrected commands equal the input: nothing was compensated"
+    );
+    largest_change
+}
+
+#[test]
+fn saved_model_applied_reproduces_the_predictions() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(POINTS));
+    let change = round_trip(&dir, &data.join("measurements.csv"), false);
+    assert!(
+        change <= 0.01,
+        "corrected commands differ from the input by up to {change} rad"
+    );
+}
+
+/// With a nest the model corrects the 0.22 rad mounting rotation too, so commands may move further; the
+/// predicted orientation must survive the round trip as exactly as the position.
+#[test]
+fn saved_nest_model_applied_reproduces_positions_and_orientations() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "pose", &small_pose(POSE_POINTS));
+    round_trip(&dir, &data.join("measurements.csv"), true);
+}
+
+/// The campaign's measurements.csv rewritten by `change`.
+fn altered(dir: &TempDir, name: &str, change: impl FnOnce(&mut Csv)) -> PathBuf {
+    let data = campaign(dir, "paper", &small_paper(40));
+    let mut table = Csv::read(&data.join("measurements.csv"));
+    change(&mut table);
+    let path = dir.path().join(name);
+    table.write(&path);
+    path
+}
+
+#[test]
+fn a_missing_joint_column_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let data = altered(&dir, "no_joint_3.csv", |t| {
+        let c = t.col("iiwa_joint_3");
+        t.header.remove(c);
+        for row in &mut t.rows {
+            row.remove(c);
+        }
+    });
+    fit_fails(&data, &dir.path().join("out"), &[], &["iiwa_joint_3"]);
+}
+
+#[test]
+fn a_non_numeric_cell_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let data = altered(&dir, "text.csv", |t| {
+        let c = t.col("iiwa_joint_2");
+        t.rows[1][c] = "abc".into();
+    });
+    // Row 3 as a spreadsheet shows it: the header is row 1.
+    fit_fails(
+        &data,
+        &dir.path().join("out"),
+        &[],
+        &["row 3", "iiwa_joint_2", "abc"],
+    );
+}
+
+#[test]
+fn a_nan_cell_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let data = altered(&dir, "nan.csv", |t| {
+        let c = t.col("y1");
+        t.rows[4][c] = "NaN".into();
+    });
+    fit_fails(&data, &dir.path().join("out"), &[], &["row 6", "y1"]);
+}
+
+/// 12 points give 6 training points for a model with 38 error parameters: the fit must refuse rather than
+/// produce a model that is mostly noise.
+#[test]
+fn fewer_training_points_than_parameters_is_refused() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "tiny", &small_paper(12));
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    fit_fails(
+        &data.join("measurements.csv"),
+        &out,
+        &["--method", "paper-rotxyz-transxyz"],
+        &[],
+    );
+}
+
+#[test]
+fn an_unknown_method_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(40));
+    fit_fails(
+        &data.join("measurements.csv"),
+        &dir.path().join("out"),
+        &["--method", "paper-magic"],
+        &["paper-magic"],
+    );
+}
+
+#[test]
+fn a_missing_data_file_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    fit_fails(&dir.path().join("nowhere.csv"), &out, &[], &["nowhere.csv"]);
+}
+
+#[test]
+fn apply_with_a_file_that_is_not_a_model_is_one_line() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(40));
+    let fit = dir.path().join("fit");
+    fit_ok(&data.join("measurements.csv"), &fit, &[]);
+    let apply_dir = dir.path().join("apply");
+    for not_a_model in [
+        fit.join("report.json"),
+        data.join("campaign.json"),
+        data.join("measurements.csv"),
+    ] {
+        let output = calibrate(&[
+            "apply".as_ref(),
+            "--model".as_ref(),
+            not_a_model.as_os_str(),
+            "--data".as_ref(),
+            data.join("measurements.csv").as_os_str(),
+            "--out".as_ref(),
+            apply_dir.join("applied.csv").as_os_str(),
+        ]);
+        let name = not_a_model.file_name().unwrap().to_str().unwrap();
+        assert_clean_failure(&output, &apply_dir, &[name]);
+    }
+}
+
+#[test]
+fn repeated_fits_are_byte_identical() {
+    let dir = TempDir::new().unwrap();
+    let paper = campaign(&dir, "paper", &small_paper(POINTS));
+    let pose = campaign(&dir, "pose", &small_pose(POSE_POINTS));
+    for (data, method) in [(&paper, "paper-rotxyz-transxyz"), (&pose, "paper-rotxyz")] {
+        let runs: Vec<PathBuf> = (0..2)
+            .map(|k| {
+                let out = dir.path().join(format!("{method}_{k}"));
+                fit_ok(&data.join("measurements.csv"), &out, &["--method", method]);
+                out
+            })
+            .collect();
+        for name in ["predictions.csv", "model.json"] {
+            assert!(
+                read(&runs[0].join(name)) == read(&runs[1].join(name)),
+                "{method}: {name} differs between two identical runs"
+            );
+        }
+    }
+}
