@@ -102,15 +102,7 @@ impl Dataset {
                 measured_cols.len()
             )));
         }
-        let flange_cols = table.group(&[
-            "flange_x",
-            "flange_y",
-            "flange_z",
-            "flange_qw",
-            "flange_qx",
-            "flange_qy",
-            "flange_qz",
-        ])?;
+        let flange_cols = table.group(&crate::measurements::FLANGE_COLUMNS)?;
         let split_col = table.column("split");
         let region_col = table.column("region");
 

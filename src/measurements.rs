@@ -9,6 +9,17 @@ use nalgebra::{Isometry3, Point3};
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 
+/// The controller's nominal flange pose: position (m) and unit quaternion, base frame.
+pub const FLANGE_COLUMNS: [&str; 7] = [
+    "flange_x",
+    "flange_y",
+    "flange_z",
+    "flange_qw",
+    "flange_qx",
+    "flange_qy",
+    "flange_qz",
+];
+
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
     (1..=count)
         .flat_map(|k| ["x", "y", "z"].map(|a| format!("{prefix}{a}{k}")))
@@ -52,18 +63,7 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     let k = reflector_count(campaign);
     let mut header: Vec<String> = vec!["point_id".into(), "region".into()];
     header.extend(campaign.joint_names.iter().cloned());
-    header.extend(
-        [
-            "flange_x",
-            "flange_y",
-            "flange_z",
-            "flange_qw",
-            "flange_qx",
-            "flange_qy",
-            "flange_qz",
-        ]
-        .map(String::from),
-    );
+    header.extend(FLANGE_COLUMNS.map(String::from));
     header.extend(xyz_columns("nom_", k));
     header.extend(xyz_columns("", k));
     let rows = campaign.points.iter().map(|p| {

@@ -5,6 +5,9 @@
 //! Campaigns come from the `campaign` binary on the shipped paper scenarios with a small point count,
 //! written to a temporary directory; both binaries run from the crate root so `robots/iiwa7.urdf` resolves.
 
+mod common;
+use common::{assert_clean_failure, edit, files_under, read};
+
 use std::collections::HashMap;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
@@ -17,16 +20,6 @@ const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
 const PAPER_POSE: &str = include_str!("../scenarios/paper_iiwa_pose.toml");
 const POINTS: usize = 300;
 const POSE_POINTS: usize = 200;
-
-/// `text` with `from` replaced by `to`, which must occur exactly once.
-fn edit(text: &str, from: &str, to: &str) -> String {
-    assert_eq!(
-        text.matches(from).count(),
-        1,
-        "expected exactly one `{from}` in the scenario"
-    );
-    text.replacen(from, to, 1)
-}
 
 fn small_paper(points: usize) -> String {
     edit(PAPER, "points = 2335", &format!("points = {points}"))
@@ -81,10 +74,6 @@ fn fit_ok(data: &Path, out: &Path, extra: &[&str]) -> String {
         String::from_utf8_lossy(&output.stderr)
     );
     String::from_utf8(output.stdout).expect("stdout is UTF-8")
-}
-
-fn read(path: &Path) -> Vec<u8> {
-    std::fs::read(path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
 }
 
 fn json(path: &Path) -> Value {
@@ -142,51 +131,6 @@ impl Csv {
         assert_eq!(map.len(), self.rows.len(), "point_ids are not unique");
         map
     }
-}
-
-fn files_under(dir: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    entries
-        .map(|e| e.expect("directory entry").path())
-        .flat_map(|p| if p.is_dir() { files_under(&p) } else { vec![p] })
-        .collect()
-}
-
-/// A failed run: non-zero exit, exactly one non-empty `error:` line on stderr containing every `needles`
-/// entry, no panic, and no file under `out`. Returns the line.
-fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> String {
-    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
-    assert!(
-        !output.status.success(),
-        "expected a failure, got success; stdout: {}",
-        String::from_utf8_lossy(&output.stdout)
-    );
-    assert!(
-        !stderr.contains("panicked"),
-        "the binary panicked: {stderr}"
-    );
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "stderr must be exactly one line: {stderr:?}"
-    );
-    let line = lines[0];
-    assert!(
-        line.starts_with("error: ") && line.len() > "error: ".len(),
-        "stderr must be a non-empty `error:` line: {line:?}"
-    );
-    for needle in needles {
-        assert!(
-            line.contains(needle),
-            "{line:?} does not mention {needle:?}"
-        );
-    }
-    let left = files_under(out);
-    assert!(left.is_empty(), "a failed run left files behind: {left:?}");
-    line.to_string()
 }
 
 /// `calibrate --data DATA --out OUT` plus `extra`, which must fail cleanly (see [`assert_clean_failure`]).

@@ -4,6 +4,9 @@
 //! Every scenario here is the shipped paper_iiwa (or paper_iiwa_pose) with a small point count, written to a
 //! temporary directory; the binary runs from the crate root so `robots/iiwa7.urdf` resolves.
 
+mod common;
+use common::{assert_clean_failure, edit, read};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -16,17 +19,6 @@ const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
 const PAPER_POSE: &str = include_str!("../scenarios/paper_iiwa_pose.toml");
 const IIWA_URDF: &str = include_str!("../robots/iiwa7.urdf");
 const POINTS: usize = 120;
-
-/// `text` with `from` replaced by `to`, which must occur exactly once (so a changed shipped scenario fails
-/// loudly here instead of silently testing something else).
-fn edit(text: &str, from: &str, to: &str) -> String {
-    assert_eq!(
-        text.matches(from).count(),
-        1,
-        "expected exactly one `{from}` in the scenario"
-    );
-    text.replacen(from, to, 1)
-}
 
 /// paper_iiwa with `points` wanted.
 fn small_paper(points: usize) -> String {
@@ -68,54 +60,6 @@ fn run_ok(dir: &TempDir, name: &str, text: &str, threads: Option<&str>) -> PathB
         String::from_utf8_lossy(&output.stderr)
     );
     out
-}
-
-fn read(path: &Path) -> Vec<u8> {
-    std::fs::read(path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
-}
-
-fn files_under(dir: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    entries
-        .map(|e| e.expect("directory entry").path())
-        .flat_map(|p| if p.is_dir() { files_under(&p) } else { vec![p] })
-        .collect()
-}
-
-/// A failed run: non-zero exit, one non-empty `error:` line on stderr containing every `needles` entry, no
-/// panic, and no file in `out`. Returns the line.
-fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> String {
-    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
-    assert!(
-        !output.status.success(),
-        "expected a failure, got success; stderr: {stderr}"
-    );
-    assert!(
-        !stderr.contains("panicked"),
-        "the binary panicked: {stderr}"
-    );
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "stderr must be exactly one line: {stderr:?}"
-    );
-    let line = lines[0];
-    assert!(
-        line.starts_with("error: ") && line.len() > "error: ".len(),
-        "stderr must be a non-empty `error:` line: {line:?}"
-    );
-    for needle in needles {
-        assert!(
-            line.contains(needle),
-            "{line:?} does not mention {needle:?}"
-        );
-    }
-    let left = files_under(out);
-    assert!(left.is_empty(), "a failed run left files behind: {left:?}");
-    line.to_string()
 }
 
 /// Runs a scenario text that must fail cleanly; returns the error line.

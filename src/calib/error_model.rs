@@ -9,10 +9,11 @@
 //! conversion.
 
 use nalgebra::{Isometry3, Matrix6xX, Point3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::robot::chain::sample_within;
 use crate::robot::dh::DhChain;
 
 /// The three error models of §2.2.
@@ -196,19 +197,6 @@ pub fn select_params(
         lower.len() == n && upper.len() == n,
         "one limit pair per joint"
     );
-    let span = |lo: f64, hi: f64| {
-        let lo = if lo.is_finite() {
-            lo
-        } else {
-            -std::f64::consts::PI
-        };
-        let hi = if hi.is_finite() {
-            hi
-        } else {
-            std::f64::consts::PI
-        };
-        (lo, hi.max(lo))
-    };
     let params = kind.params(n);
     let mut rng = ChaCha8Rng::seed_from_u64(SELECT_SEED);
     let mut pos_max = vec![0.0_f64; params.len()];
@@ -217,12 +205,7 @@ pub fn select_params(
     let mut q = vec![0.0; n];
     for _ in 0..SELECT_SAMPLES {
         for (qi, (&lo, &hi)) in q.iter_mut().zip(lower.iter().zip(upper)) {
-            let (lo, hi) = span(lo, hi);
-            *qi = if hi > lo {
-                rng.random_range(lo..hi)
-            } else {
-                lo
-            };
+            *qi = sample_within(lo, hi, &mut rng);
         }
         let j = error_jacobian(dh, &q, &origin, &params);
         for c in 0..params.len() {
@@ -253,6 +236,7 @@ pub fn select_params(
 mod tests {
     use super::*;
     use crate::robot::{Chain, urdf};
+    use rand::Rng;
 
     fn iiwa() -> (Chain, DhChain) {
         let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();

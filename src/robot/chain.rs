@@ -171,6 +171,26 @@ impl Chain {
     }
 }
 
+/// A joint value drawn uniformly from `[lo, hi]`, for random configurations: an unbounded side (a continuous
+/// joint) is cut at ±π, and an empty range gives its middle.
+pub fn sample_within(lo: f64, hi: f64, rng: &mut impl rand::Rng) -> f64 {
+    let lo = if lo.is_finite() {
+        lo
+    } else {
+        -std::f64::consts::PI
+    };
+    let hi = if hi.is_finite() {
+        hi
+    } else {
+        std::f64::consts::PI
+    };
+    if lo < hi {
+        rng.random_range(lo..=hi)
+    } else {
+        0.5 * (lo + hi)
+    }
+}
+
 /// A mass carried on the flange (tool, reflector nest), in the flange frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Payload {

@@ -22,10 +22,9 @@
 //! arm within it. Random restarts (seeded, so reproducible) cover seeds that lead nowhere.
 
 use nalgebra::{DVector, Isometry3, Matrix6, Matrix6xX, Point3, UnitQuaternion, Vector3, Vector6};
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use super::chain::{Chain, JointKind};
+use super::chain::{Chain, JointKind, sample_within};
 use super::kinematics::{Frames, forward_kinematics, point_jacobian_into};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -206,7 +205,7 @@ impl IkSolver {
                 self.q.copy_from_slice(seed);
             } else {
                 for (qi, j) in self.q.iter_mut().zip(&chain.joints) {
-                    *qi = random_within(j.lower + margin, j.upper - margin, rng);
+                    *qi = sample_within(j.lower + margin, j.upper - margin, rng);
                 }
             }
             let (outcome, iters) = self.attempt(chain, target, tool);
@@ -533,26 +532,6 @@ fn wrap_revolute(chain: &Chain, q: &mut DVector<f64>) {
     }
 }
 
-/// Uniform in `[lo, hi]`; an unbounded side (continuous joint) is cut at ±π, and a margin wider than
-/// the range gives its middle.
-fn random_within(lo: f64, hi: f64, rng: &mut ChaCha8Rng) -> f64 {
-    let lo = if lo.is_finite() {
-        lo
-    } else {
-        -std::f64::consts::PI
-    };
-    let hi = if hi.is_finite() {
-        hi
-    } else {
-        std::f64::consts::PI
-    };
-    if lo < hi {
-        rng.random_range(lo..=hi)
-    } else {
-        0.5 * (lo + hi)
-    }
-}
-
 /// World-frame residual `[p_target − p; log(R_target Rᵀ)]`: the twist that would carry the current
 /// pose onto the target, to first order.
 fn residual_of(target: &Isometry3<f64>, current: &Isometry3<f64>) -> Vector6<f64> {
@@ -585,7 +564,7 @@ mod tests {
     use super::*;
     use crate::robot::kinematics::flange_pose;
     use crate::robot::urdf::load_str;
-    use rand::SeedableRng;
+    use rand::{Rng, SeedableRng};
     use std::f64::consts::FRAC_PI_2;
 
     /// The iiwa 7 R800 from its standard DH table (a = 0): joint i's origin is Tz(d_{i−1}) Rx(α_{i−1}).

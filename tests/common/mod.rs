@@ -1,0 +1,64 @@
+//! Helpers shared by the integration tests that drive the binaries.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+/// `text` with `from` replaced by `to`, which must occur exactly once (so a changed shipped scenario fails
+/// loudly here instead of silently testing something else).
+pub fn edit(text: &str, from: &str, to: &str) -> String {
+    assert_eq!(
+        text.matches(from).count(),
+        1,
+        "expected exactly one `{from}` in the scenario"
+    );
+    text.replacen(from, to, 1)
+}
+
+pub fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()))
+}
+
+pub fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .map(|e| e.expect("directory entry").path())
+        .flat_map(|p| if p.is_dir() { files_under(&p) } else { vec![p] })
+        .collect()
+}
+
+/// A failed run: non-zero exit, one non-empty `error:` line on stderr containing every `needles` entry, no
+/// panic, and no file in `out`. Returns the line.
+pub fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> String {
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        !output.status.success(),
+        "expected a failure, got success; stderr: {stderr}"
+    );
+    assert!(
+        !stderr.contains("panicked"),
+        "the binary panicked: {stderr}"
+    );
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "stderr must be exactly one line: {stderr:?}"
+    );
+    let line = lines[0];
+    assert!(
+        line.starts_with("error: ") && line.len() > "error: ".len(),
+        "stderr must be a non-empty `error:` line: {line:?}"
+    );
+    for needle in needles {
+        assert!(
+            line.contains(needle),
+            "{line:?} does not mention {needle:?}"
+        );
+    }
+    let left = files_under(out);
+    assert!(left.is_empty(), "a failed run left files behind: {left:?}");
+    line.to_string()
+}
