@@ -4,8 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use calibench::calib::error_model::ErrorModelKind;
-use calibench::calib::paper::{PaperModel, method_name};
+use calibench::calib::method::{FitContext, MethodKind, fit};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::{Dataset, Split, random_split};
 use calibench::robot::dh::DhChain;
@@ -27,39 +26,35 @@ fn main() {
     };
     let (train, val) = (pick(Split::Train), pick(Split::Val));
     let dh = DhChain::from_chain(&sim.nominal).expect("DH");
-    let limits = (sim.nominal.lower_limits(), sim.nominal.upper_limits());
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("pool");
+    let methods = [
+        MethodKind::Nominal,
+        MethodKind::PaperRotz,
+        MethodKind::PaperRotxyz,
+        MethodKind::PaperRotxyzTransxyz,
+    ];
     for cross_terms in [false, true] {
-        let options = RegressionOptions {
-            cross_terms,
-            ..RegressionOptions::default()
+        let ctx = FitContext {
+            chain: &sim.nominal,
+            dh: &dh,
+            payload: scenario.robot.payload(),
+            regression: RegressionOptions {
+                cross_terms,
+                ..RegressionOptions::default()
+            },
         };
-        for kind in [
-            None,
-            Some(ErrorModelKind::RotZ),
-            Some(ErrorModelKind::RotXyz),
-            Some(ErrorModelKind::RotXyzTransXyz),
-        ] {
-            if cross_terms && kind.is_none() {
+        for kind in methods {
+            if cross_terms && kind == MethodKind::Nominal {
                 continue;
             }
             let mut runs: Vec<Duration> = (0..9)
                 .map(|_| {
                     let t = Instant::now();
                     single
-                        .install(|| {
-                            PaperModel::fit(
-                                kind,
-                                &dh,
-                                (&limits.0, &limits.1),
-                                &train,
-                                &val,
-                                &options,
-                            )
-                        })
+                        .install(|| fit(kind, &ctx, &train, &val))
                         .expect("fits");
                     t.elapsed()
                 })
@@ -67,7 +62,7 @@ fn main() {
             runs.sort();
             println!(
                 "fit {:<22}{} on {} training + {} validation points, one core: {:.1} ms",
-                method_name(kind),
+                kind.name(),
                 if cross_terms { " (cross terms)" } else { "" },
                 train.len(),
                 val.len(),

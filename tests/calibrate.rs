@@ -1,12 +1,12 @@
 //! The paper's pipeline on data whose errors are known exactly: a robot that follows the paper's own error
 //! model (eq. 6) with constant error transforms, measured by a noisy tracker at an unknown pose.
 
-use calibench::calib::error_model::{ErrorModelKind, FrameErrors, flange_pose_with_errors};
-use calibench::calib::paper::PaperModel;
+use calibench::calib::error_model::{FrameErrors, flange_pose_with_errors};
+use calibench::calib::method::{FitContext, MethodKind, fit};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;
-use calibench::robot::{Chain, urdf};
+use calibench::robot::{Chain, Payload, urdf};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -94,23 +94,20 @@ fn fit_constant_errors(cross_terms: bool) -> Outcome {
         s.data.subset(&idx(600, 900)),
         s.data.subset(&idx(900, 1200)),
     );
-    let limits = (s.chain.lower_limits(), s.chain.upper_limits());
-    let opts = RegressionOptions {
-        cross_terms,
-        ..RegressionOptions::default()
+    let ctx = FitContext {
+        chain: &s.chain,
+        dh: &s.dh,
+        payload: Payload::NONE,
+        regression: RegressionOptions {
+            cross_terms,
+            ..RegressionOptions::default()
+        },
     };
-    let model = PaperModel::fit(
-        Some(ErrorModelKind::RotXyzTransXyz),
-        &s.dh,
-        (&limits.0, &limits.1),
-        &train,
-        &val,
-        &opts,
-    )
-    .unwrap();
-    let obs = model.observe(&test).unwrap();
+    let model = fit(MethodKind::PaperRotxyzTransxyz, &ctx, &train, &val).unwrap();
+    let registration = model.registration();
+    let obs = registration.observe(&test).unwrap();
     let true_points: Vec<Vec<Point3<f64>>> = s.truth[900..].iter().map(|p| vec![*p]).collect();
-    let truth = model.observe_points(&test.q, &true_points).unwrap();
+    let truth = registration.observe_points(&test.q, &true_points).unwrap();
     Outcome {
         before: mean(
             obs.iter()

@@ -14,13 +14,13 @@ use nalgebra::{Point3, UnitQuaternion};
 use serde::Serialize;
 use serde_json::json;
 
-use calibench::calib::error_model::ErrorModelKind;
-use calibench::calib::paper::{Observation, PaperModel};
-use calibench::calib::regression::{RegressionOptions, r2};
+use calibench::calib::method::{self, FitContext, Fitted, MethodKind, SavedModel};
+use calibench::calib::regression::RegressionOptions;
+use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::{Dataset, Split, Truth, random_split};
 use calibench::eval::Stats;
 use calibench::robot::dh::DhChain;
-use calibench::robot::urdf;
+use calibench::robot::{Payload, urdf};
 use calibench::{Error, Result, output};
 
 #[derive(Parser, Debug)]
@@ -53,9 +53,16 @@ struct FitArgs {
     /// The link carrying the reflectors [default: the chain's last link].
     #[arg(long)]
     flange_link: Option<String>,
-    /// nominal | paper-rotz | paper-rotxyz | paper-rotxyz-transxyz
+    /// nominal | paper-rotz | paper-rotxyz | paper-rotxyz-transxyz | kinematic | elastic | residual-ridge |
+    /// hybrid | hybrid-kinematic
     #[arg(long, default_value = "paper-rotxyz")]
     method: String,
+    /// Mass on the flange (kg), for the gravity torques of the elastic methods.
+    #[arg(long, default_value_t = 0.0)]
+    payload_kg: f64,
+    /// Its centre of mass in the flange frame (m), x,y,z.
+    #[arg(long, value_delimiter = ',', default_value = "0,0,0")]
+    payload_com_m: Vec<f64>,
     /// Ground truth (`truth.csv` of a simulated campaign) to evaluate against.
     #[arg(long)]
     truth: Option<PathBuf>,
@@ -102,20 +109,6 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-fn parse_method(name: &str) -> Result<Option<ErrorModelKind>> {
-    Ok(match name {
-        "nominal" => None,
-        "paper-rotz" => Some(ErrorModelKind::RotZ),
-        "paper-rotxyz" => Some(ErrorModelKind::RotXyz),
-        "paper-rotxyz-transxyz" => Some(ErrorModelKind::RotXyzTransXyz),
-        other => {
-            return Err(Error::Invalid(format!(
-                "unknown method '{other}'; choose nominal, paper-rotz, paper-rotxyz or paper-rotxyz-transxyz"
-            )));
-        }
-    })
 }
 
 /// Distance statistics in millimetres, as `report.json` names them.
@@ -177,7 +170,7 @@ struct Errors {
     orientation_after: Vec<f64>,
 }
 
-fn errors(model: &PaperModel, observations: &[Observation]) -> Errors {
+fn errors(model: &dyn Fitted, observations: &[Observation]) -> Errors {
     let mut e = Errors {
         before: Vec::new(),
         after: Vec::new(),
@@ -224,7 +217,19 @@ fn fit(args: &FitArgs) -> Result<()> {
     let data_path = args.data.as_ref().ok_or_else(|| {
         Error::Invalid("--data FILE.csv is required (or use `calibrate apply`)".into())
     })?;
-    let kind = parse_method(&args.method)?;
+    let kind = MethodKind::parse(&args.method)?;
+    let payload = match args.payload_com_m.as_slice() {
+        [x, y, z] if args.payload_kg.is_finite() && args.payload_kg >= 0.0 => Payload {
+            mass: args.payload_kg,
+            com: [*x, *y, *z],
+        },
+        _ => {
+            return Err(Error::Invalid(
+                "--payload-kg must be finite and non-negative, --payload-com-m three numbers x,y,z"
+                    .into(),
+            ));
+        }
+    };
     let chain = urdf::load_file(&args.robot, args.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
     let data = Dataset::read(data_path, &chain.joint_names())?;
@@ -266,20 +271,21 @@ fn fit(args: &FitArgs) -> Result<()> {
     };
 
     let started = Instant::now();
-    let model = PaperModel::fit(
-        kind,
-        &dh,
-        (&chain.lower_limits(), &chain.upper_limits()),
-        &train,
-        &val,
-        &options,
-    )?;
+    let ctx = FitContext {
+        chain: &chain,
+        dh: &dh,
+        payload,
+        regression: options,
+    };
+    let model = method::fit(kind, &ctx, &train, &val)?;
+    let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
-    let obs_test = model.observe(&test)?;
-    let test_errors = errors(&model, &obs_test);
+    let obs_test = model.registration().observe(&test)?;
+    let test_errors = errors(model, &obs_test);
+    let registration = model.registration();
     let mut report = json!({
-        "method": model.method,
+        "method": model.method(),
         "data": data_path.display().to_string(),
         "robot": args.robot.display().to_string(),
         "n_train": train.len(),
@@ -287,39 +293,40 @@ fn fit(args: &FitArgs) -> Result<()> {
         "n_test": test.len(),
         "fit_ms": fit_ms,
         "registration": {
-            "tracker_to_base": model.frame.tracker_to_base,
-            "mounting_m": model.frame.mounting,
-            "rms_mm": model.frame.rms * 1e3,
+            "tracker_to_base": registration.frame.tracker_to_base,
+            "mounting_m": registration.frame.mounting,
+            "rms_mm": registration.frame.rms * 1e3,
         },
-        "kept_parameters": {
-            "position": model.position.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
-            "orientation": model.orientation.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
-        },
-        "r2": r2_report(&model, &obs_test),
         "test": errors_json(&test_errors)?,
     });
+    // The method's own facts (kept parameters, R², rank, …) sit at the top level beside the common ones.
+    if let (Some(target), serde_json::Value::Object(extra)) =
+        (report.as_object_mut(), model.report(&obs_test))
+    {
+        target.extend(extra);
+    }
     let truth_errors = match &truth {
         Some(t) => {
             let t_test = t.subset(&i_test);
-            let obs_truth = model.observe_points(&test.q, &t_test.in_tracker)?;
-            let e = errors(&model, &obs_truth);
+            let obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
+            let e = errors(model, &obs_truth);
             report["truth"] = errors_json(&e)?;
             Some(e)
         }
         None => None,
     };
 
-    let predictions = predictions_csv(&model, &data, &labels)?;
+    let predictions = predictions_csv(model, &data, &labels)?;
     output::write_files(
         &args.out,
         &[
             ("report.json", to_json(&report)?),
-            ("model.json", to_json(&model)?),
+            ("model.json", to_json(&model.save())?),
             ("predictions.csv", predictions),
         ],
     )?;
 
-    print_tables(&model.method, &test_errors, truth_errors.as_ref())?;
+    print_tables(model.method(), &test_errors, truth_errors.as_ref())?;
     println!(
         "fit on {} training + {} validation points in {fit_ms:.1} ms; wrote {}",
         train.len(),
@@ -333,39 +340,8 @@ fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
     serde_json::to_vec_pretty(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
 }
 
-/// R² of each modelled parameter on the test split (eq. 20): the identified values against the modelled ones.
-fn r2_report(model: &PaperModel, observations: &[Observation]) -> serde_json::Value {
-    let pos: Vec<_> = model.position.iter().map(|m| m.param).collect();
-    let ori: Vec<_> = model.orientation.iter().map(|m| m.param).collect();
-    let id = model.identify(observations, &pos, &ori);
-    let modelled: Vec<(Vec<f64>, Vec<f64>)> = observations
-        .iter()
-        .map(|o| model.parameters(&o.q))
-        .collect();
-    let mut out = serde_json::Map::new();
-    let groups = [
-        (&model.position, &id.position, 0),
-        (&model.orientation, &id.orientation, 1),
-    ];
-    for (models, identified, group) in groups {
-        for (k, m) in models.iter().enumerate() {
-            let y: Vec<f64> = identified.iter().map(|row| row[k]).collect();
-            let y_hat: Vec<f64> = modelled
-                .iter()
-                .map(|(p, o)| if group == 0 { p[k] } else { o[k] })
-                .collect();
-            let test = (!y.is_empty()).then(|| r2(&y, &y_hat));
-            out.insert(
-                m.name.clone(),
-                json!({ "validation": m.model.validation_r2, "test": test }),
-            );
-        }
-    }
-    serde_json::Value::Object(out)
-}
-
-fn predictions_csv(model: &PaperModel, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
-    let observations = model.observe(data)?;
+fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
+    let observations = model.registration().observe(data)?;
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("predictions.csv: {e}"));
     let mut header = vec![
@@ -386,7 +362,7 @@ fn predictions_csv(model: &PaperModel, data: &Dataset, labels: &[Split]) -> Resu
     .iter()
     .map(|s| s.to_string())
     .collect::<Vec<_>>();
-    let with_orientation = model.nest.is_some();
+    let with_orientation = model.registration().nest.is_some();
     if with_orientation {
         header.extend(
             [
@@ -485,15 +461,17 @@ fn apply(args: &ApplyArgs) -> Result<()> {
         origin: args.model.display().to_string(),
         message: format!("cannot read: {e}"),
     })?;
-    let model: PaperModel = serde_json::from_str(&text).map_err(|e| Error::Data {
+    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| Error::Data {
         origin: args.model.display().to_string(),
         message: format!("not a calibrate model: {e}"),
     })?;
-    let (ids, configurations) = calibench::dataset::read_joints(&args.data, &model.joint_names)?;
+    let model = saved.into_fitted();
+    let joint_names = model.joint_names().to_vec();
+    let (ids, configurations) = calibench::dataset::read_joints(&args.data, &joint_names)?;
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", args.out.display()));
     let mut header: Vec<String> = vec!["point_id".into()];
-    header.extend(model.joint_names.iter().cloned());
+    header.extend(joint_names.iter().cloned());
     header.extend(
         [
             "predicted_x",
@@ -506,7 +484,7 @@ fn apply(args: &ApplyArgs) -> Result<()> {
         ]
         .map(String::from),
     );
-    header.extend(model.joint_names.iter().map(|n| format!("cmd_{n}")));
+    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
     header.push("compensation_residual_m".into());
     w.write_record(&header).map_err(csv_err)?;
     for (id, q) in ids.iter().zip(&configurations) {

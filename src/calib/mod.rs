@@ -1,5 +1,6 @@
 //! Calibration methods. Registration first; the paper's method follows (issue 3).
 pub mod error_model;
+pub mod method;
 pub mod paper;
 pub mod registration;
 pub mod regression;

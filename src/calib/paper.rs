@@ -10,19 +10,19 @@
 //! 4. Predict: the modelled `E_i` go into the full kinematics (eq. 6); position from the position parameters,
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3xX, Point3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 use serde::{Deserialize, Serialize};
+use serde_json::json;
 
 use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
     select_params,
 };
-use super::registration::register_points;
-use super::regression::{RegressionOptions, RidgeModel, fit_all};
-use super::tracker_frame::{TrackerFrame, fit_tracker_frame};
+use super::method::{FitContext, Fitted, Prediction, SavedModel};
+use super::regression::{RidgeModel, fit_all, r2};
+use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::eval::centre;
 use crate::robot::dh::DhChain;
 
 /// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
@@ -45,32 +45,11 @@ pub struct PaperModel {
     pub joint_names: Vec<String>,
     /// The nominal kinematics the model corrects (DH form of the robot's URDF).
     pub dh: DhChain,
-    pub frame: TrackerFrame,
-    /// A reflector nest about its centre, in the flange frame (m); orientation is measured from it.
-    pub nest: Option<Vec<Point3<f64>>>,
+    pub registration: Registration,
     /// Names of the regression's candidate inputs: the joint angles (rad), then the nominal TCP x, y, z (m).
     pub candidates: Vec<String>,
     pub position: Vec<ParameterModel>,
     pub orientation: Vec<ParameterModel>,
-}
-
-/// One point as the method sees it, in the base frame.
-#[derive(Clone, Debug)]
-pub struct Observation {
-    pub q: Vec<f64>,
-    /// Measured point (reflector or nest centre), registered into the base frame.
-    pub position: Point3<f64>,
-    /// Measured flange orientation (nests only).
-    pub orientation: Option<UnitQuaternion<f64>>,
-}
-
-/// A predicted pose of the measured point and the flange orientation.
-#[derive(Clone, Debug)]
-pub struct Prediction {
-    pub position: Point3<f64>,
-    /// The same by the linearized model `p_R + J_e e` (eq. 10).
-    pub linearized_position: Point3<f64>,
-    pub orientation: UnitQuaternion<f64>,
 }
 
 /// Per-point identified error parameters (eq. 13), for the regression and for R² on the test split.
@@ -80,7 +59,7 @@ pub struct Identified {
     pub orientation: Vec<Vec<f64>>,
 }
 
-pub fn method_name(kind: Option<ErrorModelKind>) -> &'static str {
+fn method_name(kind: Option<ErrorModelKind>) -> &'static str {
     match kind {
         None => "nominal",
         Some(ErrorModelKind::RotZ) => "paper-rotz",
@@ -90,15 +69,12 @@ pub fn method_name(kind: Option<ErrorModelKind>) -> &'static str {
 }
 
 impl PaperModel {
-    /// Fits on `train`, choosing hyper-parameters on `val`. Joint limits decide where the parameter selection
-    /// samples configurations.
+    /// Fits on `train`, choosing hyper-parameters on `val`; `kind = None` is the `nominal` method.
     pub fn fit(
         kind: Option<ErrorModelKind>,
-        dh: &DhChain,
-        limits: (&[f64], &[f64]),
+        ctx: &FitContext,
         train: &Dataset,
         val: &Dataset,
-        options: &RegressionOptions,
     ) -> Result<PaperModel> {
         if train.is_empty() || val.is_empty() {
             return Err(Error::Invalid(format!(
@@ -107,31 +83,14 @@ impl PaperModel {
                 val.len()
             )));
         }
-        // Registration sees every point the method may fit on; the test split stays untouched.
-        let fit_points: Vec<(Vec<f64>, Point3<f64>)> = train
-            .q
-            .iter()
-            .zip(&train.measured)
-            .chain(val.q.iter().zip(&val.measured))
-            .map(|(q, m)| (q.clone(), centre(m)))
-            .collect();
-        let flanges: Vec<Isometry3<f64>> =
-            fit_points.iter().map(|(q, _)| dh.flange_pose(q)).collect();
-        let centres: Vec<Point3<f64>> = fit_points.iter().map(|(_, c)| *c).collect();
-        let guess = match &train.nominal_reflectors {
-            Some(nom) => dh.flange_pose(&train.q[0]).inverse() * centre(&nom[0]),
-            None => Point3::origin(),
-        };
-        let frame = fit_tracker_frame(&centres, &flanges, &guess)?;
-        let nest = nest_geometry(dh, train)?;
-
+        let dh = ctx.dh;
+        let registration = Registration::fit(dh, train, val)?;
         let mut model = PaperModel {
             method: method_name(kind).to_string(),
             kind,
             joint_names: train.joint_names.clone(),
             dh: dh.clone(),
-            frame,
-            nest,
+            registration,
             candidates: train
                 .joint_names
                 .iter()
@@ -144,7 +103,8 @@ impl PaperModel {
         let Some(kind) = kind else {
             return Ok(model);
         };
-        let selection = select_params(dh, limits.0, limits.1, kind);
+        let (lower, upper) = ctx.limits();
+        let selection = select_params(dh, &lower, &upper, kind);
         // Three coordinates per point: with fewer than there are parameters not even a constant model of the
         // parameters is determined, and the per-parameter regressions would fit noise.
         if 3 * train.len() < selection.position.len() {
@@ -157,12 +117,15 @@ impl PaperModel {
                 method_name(Some(kind))
             )));
         }
-        let orientation_params = if model.nest.is_some() {
+        let orientation_params = if model.registration.nest.is_some() {
             selection.orientation_only.clone()
         } else {
             Vec::new()
         };
-        let (obs_train, obs_val) = (model.observe(train)?, model.observe(val)?);
+        let (obs_train, obs_val) = (
+            model.registration.observe(train)?,
+            model.registration.observe(val)?,
+        );
         let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
         let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
         let (x_train, x_val) = (
@@ -183,7 +146,7 @@ impl PaperModel {
                 &to_matrix(y_train),
                 &x_val,
                 &to_matrix(y_val),
-                options,
+                &ctx.regression,
             )?;
             Ok(params
                 .iter()
@@ -204,39 +167,6 @@ impl PaperModel {
         Ok(model)
     }
 
-    /// The dataset's measurements in the base frame.
-    pub fn observe(&self, data: &Dataset) -> Result<Vec<Observation>> {
-        self.observe_points(&data.q, &data.measured)
-    }
-
-    /// Measurements (tracker frame, per reflector) of configurations `q`, in the base frame.
-    pub fn observe_points(
-        &self,
-        q: &[Vec<f64>],
-        measured: &[Vec<Point3<f64>>],
-    ) -> Result<Vec<Observation>> {
-        q.iter()
-            .zip(measured)
-            .map(|(q, points)| {
-                let orientation = match &self.nest {
-                    Some(nest) if points.len() == nest.len() => {
-                        let c = centre(points);
-                        let local: Vec<Point3<f64>> =
-                            points.iter().map(|p| Point3::from(p - c)).collect();
-                        let fit = register_points(nest, &local)?;
-                        Some(self.frame.tracker_to_base.rotation * fit.transform.rotation)
-                    }
-                    _ => None,
-                };
-                Ok(Observation {
-                    q: q.clone(),
-                    position: self.frame.to_base(&centre(points)),
-                    orientation,
-                })
-            })
-            .collect()
-    }
-
     /// Eq. 13 per point: minimum-norm error parameters explaining each observation's deviation.
     pub fn identify(
         &self,
@@ -251,13 +181,23 @@ impl PaperModel {
         for o in observations {
             let flange = self.dh.flange_pose(&o.q);
             if !position_params.is_empty() {
-                let j = error_jacobian(&self.dh, &o.q, &self.frame.mounting, position_params);
-                let dp = o.position - flange * self.frame.mounting;
+                let j = error_jacobian(
+                    &self.dh,
+                    &o.q,
+                    &self.registration.frame.mounting,
+                    position_params,
+                );
+                let dp = o.position - flange * self.registration.frame.mounting;
                 id.position
                     .push(min_norm(j.fixed_rows::<3>(0).into_owned(), dp));
             }
             if let (false, Some(measured)) = (orientation_params.is_empty(), o.orientation) {
-                let j = error_jacobian(&self.dh, &o.q, &self.frame.mounting, orientation_params);
+                let j = error_jacobian(
+                    &self.dh,
+                    &o.q,
+                    &self.registration.frame.mounting,
+                    orientation_params,
+                );
                 // The relative rotation, in the base frame, is what J_e linearizes; eq. 25's difference of
                 // rotation vectors equals it only to first order near the identity.
                 let dw = (measured * flange.rotation.inverse()).scaled_axis();
@@ -278,7 +218,7 @@ impl PaperModel {
     }
 
     fn candidates_of(&self, q: &[f64]) -> Vec<f64> {
-        let tcp = self.dh.flange_pose(q) * self.frame.mounting;
+        let tcp = self.dh.flange_pose(q) * self.registration.frame.mounting;
         q.iter().copied().chain([tcp.x, tcp.y, tcp.z]).collect()
     }
 
@@ -295,21 +235,22 @@ impl PaperModel {
     }
 
     /// Predicted measured point and flange orientation for configuration `q`.
-    pub fn predict(&self, q: &[f64]) -> Prediction {
+    fn prediction(&self, q: &[f64]) -> Prediction {
         let (ep, eo) = self.parameters(q);
         let nominal = self.dh.flange_pose(q);
         let position =
             flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.position, &ep))
-                * self.frame.mounting;
+                * self.registration.frame.mounting;
         let orientation =
             flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.orientation, &eo))
                 .rotation;
         let linearized_position = if self.position.is_empty() {
-            nominal * self.frame.mounting
+            nominal * self.registration.frame.mounting
         } else {
             let params: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
-            let j = error_jacobian(&self.dh, q, &self.frame.mounting, &params);
-            nominal * self.frame.mounting + j.fixed_rows::<3>(0) * DVector::from_vec(ep)
+            let j = error_jacobian(&self.dh, q, &self.registration.frame.mounting, &params);
+            nominal * self.registration.frame.mounting
+                + j.fixed_rows::<3>(0) * DVector::from_vec(ep)
         };
         Prediction {
             position,
@@ -317,91 +258,6 @@ impl PaperModel {
             orientation,
         }
     }
-
-    /// The nominal prediction: what the controller believes ("before").
-    pub fn nominal(&self, q: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
-        let f = self.dh.flange_pose(q);
-        (f * self.frame.mounting, f.rotation)
-    }
-
-    /// Joint angles that make the calibrated model put the measured point (and, with a nest model, the
-    /// flange orientation) where the nominal model puts them at `q_intended`: the command a controller should
-    /// be sent. Gauss–Newton on the nominal Jacobian, since model and nominal differ by a fraction of a
-    /// millimetre. Returns the command and the remaining position error (m).
-    pub fn compensate(&self, q_intended: &[f64]) -> Result<(Vec<f64>, f64)> {
-        let (target_p, target_r) = self.nominal(q_intended);
-        let use_rotation = !self.orientation.is_empty();
-        let mut q = q_intended.to_vec();
-        let mut err = f64::INFINITY;
-        for _ in 0..20 {
-            let pred = self.predict(&q);
-            let dp = target_p - pred.position;
-            let dr = (target_r * pred.orientation.inverse()).scaled_axis();
-            err = dp.norm();
-            if err < 1e-10 && (!use_rotation || dr.norm() < 1e-10) {
-                return Ok((q, err));
-            }
-            let j = self.nominal_jacobian(&q);
-            let rows = if use_rotation { 6 } else { 3 };
-            let mut rhs = DVector::zeros(rows);
-            rhs.fixed_rows_mut::<3>(0).copy_from(&dp);
-            if use_rotation {
-                rhs.fixed_rows_mut::<3>(3).copy_from(&dr);
-            }
-            let step = j
-                .rows(0, rows)
-                .into_owned()
-                .svd(true, true)
-                .solve(&rhs, 1e-12)
-                .map_err(|e| Error::Invalid(format!("compensation: singular Jacobian ({e})")))?;
-            for (qi, s) in q.iter_mut().zip(step.iter()) {
-                *qi += s;
-            }
-        }
-        if err < 1e-7 {
-            Ok((q, err))
-        } else {
-            Err(Error::Invalid(format!(
-                "compensation did not converge ({err:.3e} m left): the configuration may be singular"
-            )))
-        }
-    }
-
-    /// Geometric Jacobian of the measured point (rows 0–2) and the flange rotation (rows 3–5), nominal model.
-    fn nominal_jacobian(&self, q: &[f64]) -> DMatrix<f64> {
-        let frames = self.dh.frames(q);
-        let n = self.dh.dof();
-        let p = frames[n] * self.dh.tool * self.frame.mounting;
-        DMatrix::from_fn(6, n, |r, c| {
-            let f = &frames[c];
-            let z = f.rotation * Vector3::z();
-            let col = if self.dh.rows[c].prismatic {
-                [z.x, z.y, z.z, 0.0, 0.0, 0.0]
-            } else {
-                let v = z.cross(&(p - Point3::from(f.translation.vector)));
-                [v.x, v.y, v.z, z.x, z.y, z.z]
-            };
-            col[r]
-        })
-    }
-}
-
-/// The nest about its centre in the flange frame, from the nominal reflector positions of the first point.
-fn nest_geometry(dh: &DhChain, data: &Dataset) -> Result<Option<Vec<Point3<f64>>>> {
-    if data.reflectors() < 3 {
-        return Ok(None);
-    }
-    let Some(nominal) = &data.nominal_reflectors else {
-        return Err(Error::Data {
-            origin: data.origin.clone(),
-            message: "three reflectors but no nom_x1 … nom_z3 columns: the nest geometry on the flange is unknown"
-                .into(),
-        });
-    };
-    let flange_inv = dh.flange_pose(&data.q[0]).inverse();
-    let local: Vec<Point3<f64>> = nominal[0].iter().map(|p| flange_inv * p).collect();
-    let c = centre(&local);
-    Ok(Some(local.iter().map(|p| Point3::from(p - c)).collect()))
 }
 
 fn min_norm(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
@@ -414,4 +270,69 @@ fn min_norm(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
 
 fn j_cols(svd: &nalgebra::SVD<f64, nalgebra::U3, nalgebra::Dyn>) -> usize {
     svd.v_t.as_ref().map_or(0, |v| v.ncols())
+}
+
+impl Fitted for PaperModel {
+    fn method(&self) -> &str {
+        &self.method
+    }
+
+    fn registration(&self) -> &Registration {
+        &self.registration
+    }
+
+    fn joint_names(&self) -> &[String] {
+        &self.joint_names
+    }
+
+    fn dh(&self) -> &DhChain {
+        &self.dh
+    }
+
+    fn predict(&self, q: &[f64]) -> Prediction {
+        self.prediction(q)
+    }
+
+    fn models_orientation(&self) -> bool {
+        !self.orientation.is_empty()
+    }
+
+    /// The kept parameters and, per parameter, R² on validation and test data (eq. 20): the identified values
+    /// of the test points against the modelled ones.
+    fn report(&self, test: &[Observation]) -> serde_json::Value {
+        let pos: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
+        let ori: Vec<ErrorParam> = self.orientation.iter().map(|m| m.param).collect();
+        let id = self.identify(test, &pos, &ori);
+        let modelled: Vec<(Vec<f64>, Vec<f64>)> =
+            test.iter().map(|o| self.parameters(&o.q)).collect();
+        let mut r2s = serde_json::Map::new();
+        for (models, identified, group) in [
+            (&self.position, &id.position, 0),
+            (&self.orientation, &id.orientation, 1),
+        ] {
+            for (k, m) in models.iter().enumerate() {
+                let y: Vec<f64> = identified.iter().map(|row| row[k]).collect();
+                let y_hat: Vec<f64> = modelled
+                    .iter()
+                    .map(|(p, o)| if group == 0 { p[k] } else { o[k] })
+                    .collect();
+                let test_r2 = (!y.is_empty()).then(|| r2(&y, &y_hat));
+                r2s.insert(
+                    m.name.clone(),
+                    json!({ "validation": m.model.validation_r2, "test": test_r2 }),
+                );
+            }
+        }
+        json!({
+            "kept_parameters": {
+                "position": self.position.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
+                "orientation": self.orientation.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
+            },
+            "r2": r2s,
+        })
+    }
+
+    fn save(&self) -> SavedModel {
+        SavedModel::Paper(self.clone())
+    }
 }

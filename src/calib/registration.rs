@@ -31,6 +31,12 @@ const COLLINEAR_TOL: f64 = 1e-10;
 /// point written several times with rounding differences.
 const COINCIDENT_TOL: f64 = 1e-12;
 
+/// The centre of a point's reflectors: the reflector itself for a position campaign, the nest centre for a
+/// nest (about which an unknown nest rotation turns, so its position error is the robot's alone).
+pub fn centre(points: &[Point3<f64>]) -> Point3<f64> {
+    Point3::from(points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / points.len().max(1) as f64)
+}
+
 /// Finds the rigid `T` minimizing `Σ |to_i - T·from_i|²`.
 ///
 /// The rotation is always proper (det = +1): when the unconstrained optimum of the orthogonal Procrustes

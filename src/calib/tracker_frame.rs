@@ -13,8 +13,10 @@ use nalgebra::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::registration::register_points;
+use super::registration::{centre, register_points};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::robot::dh::DhChain;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrackerFrame {
@@ -32,6 +34,99 @@ impl TrackerFrame {
     pub fn to_base(&self, tracker_point: &Point3<f64>) -> Point3<f64> {
         self.tracker_to_base * tracker_point
     }
+}
+
+/// What every method starts from: the tracker frame, the mounting of the measured point, and for a reflector
+/// nest its geometry about its centre (flange frame), from which the flange orientation is measured.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Registration {
+    pub frame: TrackerFrame,
+    pub nest: Option<Vec<Point3<f64>>>,
+}
+
+/// One measured point as a method sees it, in the base frame.
+#[derive(Clone, Debug)]
+pub struct Observation {
+    pub q: Vec<f64>,
+    /// The measured point (reflector or nest centre), registered into the base frame.
+    pub position: Point3<f64>,
+    /// The measured flange orientation (nests only).
+    pub orientation: Option<UnitQuaternion<f64>>,
+}
+
+impl Registration {
+    /// Registers on the training and validation points together (everything a method may fit on; the test
+    /// split stays untouched). The mounting guess comes from the `nom_*` columns when the data has them.
+    pub fn fit(dh: &DhChain, train: &Dataset, val: &Dataset) -> Result<Registration> {
+        let q: Vec<&Vec<f64>> = train.q.iter().chain(&val.q).collect();
+        let centres: Vec<Point3<f64>> = train
+            .measured
+            .iter()
+            .chain(&val.measured)
+            .map(|m| centre(m))
+            .collect();
+        let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| dh.flange_pose(q)).collect();
+        let guess = match &train.nominal_reflectors {
+            Some(nom) if !train.is_empty() => {
+                dh.flange_pose(&train.q[0]).inverse() * centre(&nom[0])
+            }
+            _ => Point3::origin(),
+        };
+        Ok(Registration {
+            frame: fit_tracker_frame(&centres, &flanges, &guess)?,
+            nest: nest_geometry(dh, train)?,
+        })
+    }
+
+    pub fn observe(&self, data: &Dataset) -> Result<Vec<Observation>> {
+        self.observe_points(&data.q, &data.measured)
+    }
+
+    /// Measurements (tracker frame, per reflector) of configurations `q`, in the base frame.
+    pub fn observe_points(
+        &self,
+        q: &[Vec<f64>],
+        measured: &[Vec<Point3<f64>>],
+    ) -> Result<Vec<Observation>> {
+        q.iter()
+            .zip(measured)
+            .map(|(q, points)| {
+                let orientation = match &self.nest {
+                    Some(nest) if points.len() == nest.len() => {
+                        let c = centre(points);
+                        let local: Vec<Point3<f64>> =
+                            points.iter().map(|p| Point3::from(p - c)).collect();
+                        let fit = register_points(nest, &local)?;
+                        Some(self.frame.tracker_to_base.rotation * fit.transform.rotation)
+                    }
+                    _ => None,
+                };
+                Ok(Observation {
+                    q: q.clone(),
+                    position: self.frame.to_base(&centre(points)),
+                    orientation,
+                })
+            })
+            .collect()
+    }
+}
+
+/// The nest about its centre in the flange frame, from the nominal reflector positions of the first point.
+fn nest_geometry(dh: &DhChain, data: &Dataset) -> Result<Option<Vec<Point3<f64>>>> {
+    if data.reflectors() < 3 || data.is_empty() {
+        return Ok(None);
+    }
+    let Some(nominal) = &data.nominal_reflectors else {
+        return Err(Error::Data {
+            origin: data.origin.clone(),
+            message: "three reflectors but no nom_x1 … nom_z3 columns: the nest geometry on the flange is unknown"
+                .into(),
+        });
+    };
+    let flange_inv = dh.flange_pose(&data.q[0]).inverse();
+    let local: Vec<Point3<f64>> = nominal[0].iter().map(|p| flange_inv * p).collect();
+    let c = centre(&local);
+    Ok(Some(local.iter().map(|p| Point3::from(p - c)).collect()))
 }
 
 /// Fits the tracker frame and the mounting. `mounting_guess`: the nominal mounting, or the flange origin when

@@ -9,7 +9,7 @@ use nalgebra::Point3;
 use serde::Serialize;
 
 use super::stats::Stats;
-use crate::calib::registration::register_points;
+use crate::calib::registration::{centre, register_points};
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 use crate::robot::Chain;
@@ -25,18 +25,6 @@ pub fn registered_distances(
 ) -> Result<Vec<f64>> {
     let fit = register_points(measured, reference)?;
     Ok(fit.residuals)
-}
-
-/// The centre of a point's reflectors: the reflector itself for a position campaign, the nest centre for a
-/// nest (about which an unknown nest rotation turns, so its position error is the robot's alone).
-pub fn centre(points: &[Point3<f64>]) -> Point3<f64> {
-    Point3::from(
-        points
-            .iter()
-            .map(|p| p.coords)
-            .sum::<nalgebra::Vector3<f64>>()
-            / points.len().max(1) as f64,
-    )
 }
 
 /// The paper's "Measured" column: tracker points registered onto the nominal reflector positions, one centre

@@ -4,5 +4,6 @@
 pub mod budget;
 pub mod stats;
 
-pub use budget::{Budget, centre, measured, registered_distances};
+pub use crate::calib::registration::centre;
+pub use budget::{Budget, measured, registered_distances};
 pub use stats::Stats;
