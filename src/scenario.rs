@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
+use crate::eval::EvaluationConfig;
 use crate::robot::{Chain, Payload, urdf};
 use crate::tracker::TrackerConfig;
 use crate::tracker::reflector::ReflectorConfig;
@@ -26,6 +27,9 @@ pub struct Scenario {
     pub reflectors: ReflectorConfig,
     pub campaign: CampaignConfig,
     pub regions: Vec<RegionConfig>,
+    /// What to fit on the campaign and how to judge it; no evaluation when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<EvaluationConfig>,
     /// Where the scenario came from (its path), for messages; not part of the file.
     #[serde(skip)]
     pub origin: String,
@@ -141,6 +145,11 @@ impl Scenario {
         self.campaign
             .validate()
             .map_err(|m| format!("campaign: {m}"))?;
+        if let Some(evaluation) = &self.evaluation {
+            evaluation
+                .validate()
+                .map_err(|m| format!("evaluation: {m}"))?;
+        }
         Ok(())
     }
 

@@ -1,5 +1,7 @@
 //! `campaign [SCENARIO.toml] [--out DIR] [--threads N]`: simulates a laser-tracker campaign of a robot
-//! whose true errors are known, and writes `measurements.csv`, `truth.csv` and `campaign.json`.
+//! whose true errors are known, and writes `measurements.csv`, `truth.csv` and `campaign.json`; with an
+//! `[evaluation]` section it then fits the listed methods, judges them against the truth and writes
+//! `evaluation.json` beside them.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -92,17 +94,26 @@ fn run(args: &Args) -> Result<()> {
     });
     let json = serde_json::to_vec_pretty(&report)
         .map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
-    output::write_files(
-        &out,
-        &[
-            (
-                "measurements.csv",
-                measurements::measurements_csv(campaign)?,
-            ),
-            ("truth.csv", measurements::truth_csv(campaign)?),
-            ("campaign.json", json),
-        ],
-    )?;
+    let mut files = vec![
+        (
+            "measurements.csv",
+            measurements::measurements_csv(campaign)?,
+        ),
+        ("truth.csv", measurements::truth_csv(campaign)?),
+        ("campaign.json", json),
+    ];
+    let evaluation = match &scenario.evaluation {
+        Some(config) => {
+            let started = Instant::now();
+            let evaluation = eval::evaluate(&scenario, &sim, config)?;
+            let json = serde_json::to_vec_pretty(&evaluation)
+                .map_err(|e| Error::Invalid(format!("evaluation.json: {e}")))?;
+            files.push(("evaluation.json", json));
+            Some((evaluation, started.elapsed()))
+        }
+        None => None,
+    };
+    output::write_files(&out, &files)?;
 
     println!(
         "scenario '{}': {} points in {:.2} s",
@@ -137,6 +148,14 @@ fn run(args: &Args) -> Result<()> {
     row("true, all systematic errors", &budget.all_systematic);
     row("true, elastic deflection only", &budget.elastic_only);
     row("true, rigid errors only", &budget.rigid_only);
+    if let Some((evaluation, took)) = &evaluation {
+        print!("{}", evaluation.table());
+        println!(
+            "evaluated {} methods in {:.2} s",
+            evaluation.methods.len(),
+            took.as_secs_f64()
+        );
+    }
     println!("wrote {}", out.display());
     Ok(())
 }

@@ -5,8 +5,10 @@
 use nalgebra::{DMatrix, DVector, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::kinematic::KinematicModel;
 use super::paper::PaperModel;
 use super::regression::RegressionOptions;
+use super::residual::{HybridModel, ResidualModel};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -197,12 +199,18 @@ pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) 
 #[serde(tag = "model", rename_all = "kebab-case")]
 pub enum SavedModel {
     Paper(PaperModel),
+    Kinematic(Box<KinematicModel>),
+    Residual(ResidualModel),
+    Hybrid(HybridModel),
 }
 
 impl SavedModel {
     pub fn into_fitted(self) -> Box<dyn Fitted> {
         match self {
             SavedModel::Paper(m) => Box::new(m),
+            SavedModel::Kinematic(m) => m,
+            SavedModel::Residual(m) => Box::new(m),
+            SavedModel::Hybrid(m) => Box::new(m.into_fitted()),
         }
     }
 }
@@ -223,9 +231,20 @@ pub fn fit(
         MethodKind::PaperRotz => paper(Some(E::RotZ)),
         MethodKind::PaperRotxyz => paper(Some(E::RotXyz)),
         MethodKind::PaperRotxyzTransxyz => paper(Some(E::RotXyzTransXyz)),
-        other => Err(Error::Invalid(format!(
-            "method '{}' is not implemented yet",
-            other.name()
-        ))),
+        MethodKind::Kinematic => Ok(Box::new(KinematicModel::fit(false, ctx, train, val)?)),
+        MethodKind::Elastic => Ok(Box::new(KinematicModel::fit(true, ctx, train, val)?)),
+        MethodKind::ResidualRidge => Ok(Box::new(ResidualModel::fit(ctx, train, val)?)),
+        MethodKind::Hybrid => Ok(Box::new(HybridModel::fit(
+            MethodKind::Elastic,
+            ctx,
+            train,
+            val,
+        )?)),
+        MethodKind::HybridKinematic => Ok(Box::new(HybridModel::fit(
+            MethodKind::Kinematic,
+            ctx,
+            train,
+            val,
+        )?)),
     }
 }

@@ -1,7 +1,9 @@
 //! Calibration methods. Registration first; the paper's method follows (issue 3).
 pub mod error_model;
+pub mod kinematic;
 pub mod method;
 pub mod paper;
 pub mod registration;
 pub mod regression;
+pub mod residual;
 pub mod tracker_frame;

@@ -62,6 +62,25 @@ pub struct CampaignPoint {
     pub q_true: Vec<f64>,
 }
 
+/// A point of a noise-free ground-truth set ([`Setup::ground_truth`]): where the true arm really is for a
+/// command, in the world frame, with neither repeatability nor tracker noise.
+#[derive(Clone, Debug)]
+pub struct TruePoint {
+    pub region: String,
+    /// Commanded joint angles (rad): the nominal inverse kinematics of the target.
+    pub q_cmd: Vec<f64>,
+    /// The target flange pose, which the nominal model reaches at `q_cmd` (world frame).
+    pub nominal_flange: Isometry3<f64>,
+    /// The flange pose the true arm reaches at `q_cmd`, noise-free (world frame).
+    pub true_flange: Isometry3<f64>,
+    /// The true reflector positions there (world frame).
+    pub true_reflectors: Vec<Point3<f64>>,
+}
+
+/// Ground-truth sets draw their layouts and targets with this added to the attempt index, far above the
+/// campaign's attempts (< `MAX_ATTEMPTS`), so they never share a random stream with the measured points.
+pub const GROUND_TRUTH_ATTEMPT: u64 = 1 << 32;
+
 /// Why a candidate target did not become a measured point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Reason {
@@ -236,20 +255,7 @@ impl Setup<'_> {
             })
             .collect();
 
-        // The static deflection of every planned command: fixed point in parallel, or the rapier reference.
-        let unloaded: Vec<Option<Vec<f64>>> = planned
-            .par_iter()
-            .map_init(
-                || TrueState::new(self.robot),
-                |state, p| {
-                    p.as_ref().ok().map(|p| {
-                        self.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
-                        state.q0.clone()
-                    })
-                },
-            )
-            .collect();
-        let deflected = self.deflect_all(&unloaded)?;
+        let deflected = self.deflect_planned(&planned)?;
 
         let outcomes: Vec<std::result::Result<CampaignPoint, Reason>> = planned
             .into_par_iter()
@@ -275,6 +281,72 @@ impl Setup<'_> {
         }
         counts.feasible = accepted.len();
         Ok((accepted, counts))
+    }
+
+    /// A noise-free ground-truth set in `region` (index `r` in the scenario) at the layout points `unit` (unit-cube
+    /// coordinates of the region's box; values outside [0, 1] lie outside the box). Targets, nominal inverse
+    /// kinematics and the arm's feasibility (joint limits, self-collision, obstacles) are as in a campaign; the
+    /// tracker is not involved (no line of sight, no acceptance cone, no measurement noise) and the arm does not
+    /// scatter (no repeatability). The deflection is the scenario's solver. Infeasible targets are dropped and
+    /// counted. `set` numbers the set, so different sets (and the campaign) draw independent orientations.
+    pub fn ground_truth(
+        &self,
+        r: u64,
+        set: u64,
+        region: &RegionConfig,
+        unit: &[[f64; 3]],
+    ) -> Result<(Vec<TruePoint>, Rejections)> {
+        let collision = CollisionModel::new(self.nominal);
+        let anchor = self.anchor(region)?;
+        let attempt = GROUND_TRUTH_ATTEMPT + set;
+        let init = || Work {
+            ik: IkSolver::new(self.nominal, self.ik_options()),
+            frames: Frames::new(self.nominal),
+            state: TrueState::new(self.robot),
+        };
+        let planned: Vec<std::result::Result<Planned, Reason>> = unit
+            .par_iter()
+            .enumerate()
+            .map_init(init, |work, (i, u)| {
+                self.plan(r, attempt, i as u64, region, &anchor, u, &collision, work)
+            })
+            .collect();
+        let deflected = self.deflect_planned(&planned)?;
+        let mut counts = Rejections {
+            candidates: unit.len(),
+            ..Rejections::default()
+        };
+        let mut points = Vec::new();
+        let mut state = TrueState::new(self.robot);
+        for (plan, q_link) in planned.into_iter().zip(deflected) {
+            match (plan, q_link) {
+                (Ok(plan), Some(q_link)) => {
+                    self.robot.reach_with_angles(&q_link, None, &mut state);
+                    let true_flange = state.frames.flange;
+                    points.push(TruePoint {
+                        region: region.name.clone(),
+                        q_cmd: plan.q_cmd,
+                        nominal_flange: plan.nominal_flange,
+                        true_flange,
+                        true_reflectors: self
+                            .mounting
+                            .actual
+                            .iter()
+                            .map(|p| true_flange * p)
+                            .collect(),
+                    });
+                }
+                (Err(reason), _) => counts.count(reason),
+                (Ok(_), None) => {
+                    return Err(Error::Physics(
+                        "ground truth: a planned command has no deflection".into(),
+                    ));
+                }
+            }
+        }
+        counts.feasible = points.len();
+        counts.used = points.len();
+        Ok((points, counts))
     }
 
     /// No random restarts: a restart may land on another branch (elbow, wrist flip), and a campaign that
@@ -378,6 +450,26 @@ impl Setup<'_> {
             nominal_flange: work.frames.flange,
             q_cmd: solution.q,
         })
+    }
+
+    /// The static deflection of every planned command: fixed point in parallel, or the rapier reference.
+    fn deflect_planned(
+        &self,
+        planned: &[std::result::Result<Planned, Reason>],
+    ) -> Result<Vec<Option<Vec<f64>>>> {
+        let unloaded: Vec<Option<Vec<f64>>> = planned
+            .par_iter()
+            .map_init(
+                || TrueState::new(self.robot),
+                |state, p| {
+                    p.as_ref().ok().map(|p| {
+                        self.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
+                        state.q0.clone()
+                    })
+                },
+            )
+            .collect();
+        self.deflect_all(&unloaded)
     }
 
     fn deflect_all(&self, unloaded: &[Option<Vec<f64>>]) -> Result<Vec<Option<Vec<f64>>>> {

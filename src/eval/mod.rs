@@ -2,8 +2,12 @@
 //! The only stage allowed to read the truth.
 
 pub mod budget;
+pub mod oracle;
 pub mod stats;
+pub mod truth;
 
 pub use crate::calib::registration::centre;
 pub use budget::{Budget, measured, registered_distances};
+pub use oracle::Oracle;
 pub use stats::Stats;
+pub use truth::{Evaluation, EvaluationConfig, GroundTruth, evaluate};
