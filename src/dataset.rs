@@ -6,6 +6,9 @@
 //! nest) are required; the other groups (`point_id`, `region`, `split`, `nom_*`, `flange_*`) are read
 //! when present and must then be complete. Every fault is reported on one line naming the row as a
 //! spreadsheet shows it (the header is row 1, the first data row is row 2) and the column.
+//!
+//! A foreign export (another delimiter, decimal commas, millimetres and degrees, a 6-DoF probe's orientation, a
+//! temperature column) is read through a [`mapping::ColumnMapping`] instead.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -15,6 +18,8 @@ use rand::seq::SliceRandom;
 
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
+
+pub mod mapping;
 
 /// The role of a point in a calibration benchmark.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -64,6 +69,19 @@ pub struct Dataset {
     pub nominal_flange: Option<Vec<Isometry3<f64>>>,
     pub split: Option<Vec<Split>>,
     pub regions: Option<Vec<String>>,
+    /// Measured orientation of a 6-DoF probe (its frame in the tracker frame) when the source has it (a
+    /// [`mapping::ColumnMapping`] with an `[orientation]` group); the probe's mounting on the flange is unknown.
+    pub measured_orientation: Option<Vec<UnitQuaternion<f64>>>,
+    /// Inputs beyond the joint angles (e.g. the temperature) that a method may regress on.
+    pub extra_inputs: Option<ExtraInputs>,
+}
+
+/// Per-point values of named inputs beyond the joint angles.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtraInputs {
+    pub names: Vec<String>,
+    /// One row per point, in `names` order.
+    pub values: Vec<Vec<f64>>,
 }
 
 impl Dataset {
@@ -146,6 +164,8 @@ impl Dataset {
             nominal_flange: flange,
             split,
             regions,
+            measured_orientation: None,
+            extra_inputs: None,
         })
     }
 
@@ -177,7 +197,29 @@ impl Dataset {
             nominal_flange: self.nominal_flange.as_deref().map(|v| pick(v, indices)),
             split: self.split.as_deref().map(|v| pick(v, indices)),
             regions: self.regions.as_deref().map(|v| pick(v, indices)),
+            measured_orientation: self
+                .measured_orientation
+                .as_deref()
+                .map(|v| pick(v, indices)),
+            extra_inputs: self.extra_inputs.as_ref().map(|x| ExtraInputs {
+                names: x.names.clone(),
+                values: pick(&x.values, indices),
+            }),
         }
+    }
+
+    /// Names of the extra inputs (empty without any).
+    pub fn extra_input_names(&self) -> &[String] {
+        self.extra_inputs
+            .as_ref()
+            .map_or(&[], |x| x.names.as_slice())
+    }
+
+    /// The extra inputs of point `i` (empty without any).
+    pub fn extra_inputs_of(&self, i: usize) -> &[f64] {
+        self.extra_inputs
+            .as_ref()
+            .map_or(&[], |x| x.values[i].as_slice())
     }
 }
 
@@ -356,6 +398,30 @@ pub fn random_split(n: usize, fractions: [f64; 3], seed: u64) -> Result<Vec<Spli
         for &i in &order[cuts[k]..cuts[k + 1]] {
             labels[i] = SPLITS[k];
         }
+    }
+    Ok(labels)
+}
+
+/// A seeded split into training and validation only, for data whose test points are elsewhere (another
+/// campaign): the points shuffled as [`random_split`] shuffles them, the first `round(n · train_fraction)`
+/// training, the rest validation. Errors: a fraction outside (0, 1), or either set left empty.
+pub fn random_train_val(n: usize, train_fraction: f64, seed: u64) -> Result<Vec<Split>> {
+    if !(train_fraction.is_finite() && train_fraction > 0.0 && train_fraction < 1.0) {
+        return Err(Error::Invalid(format!(
+            "training fraction {train_fraction}: it must lie strictly between 0 and 1"
+        )));
+    }
+    let cut = ((n as f64) * train_fraction).round() as usize;
+    if cut == 0 || cut >= n {
+        return Err(Error::Invalid(format!(
+            "{n} points at a training fraction of {train_fraction} leave the training or the validation set empty"
+        )));
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut derive(seed, Stream::Split, &[]));
+    let mut labels = vec![Split::Val; n];
+    for &i in &order[..cut] {
+        labels[i] = Split::Train;
     }
     Ok(labels)
 }

@@ -11,9 +11,11 @@ pub mod error;
 pub mod eval;
 pub mod measurements;
 pub mod output;
+pub mod report;
 pub mod rng;
 pub mod robot;
 pub mod scenario;
+pub mod study;
 pub mod tracker;
 pub mod truth;
 

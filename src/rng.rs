@@ -14,6 +14,8 @@ pub enum Stream {
     Target = 4,
     Measurement = 5,
     Split = 6,
+    /// The study's campaigns: one seed per (region, layout, size, repetition), and its test sets.
+    Study = 7,
 }
 
 /// A generator for `purpose` and up to three indices (region, attempt, point, …). The key holds the seed,

@@ -10,6 +10,7 @@ use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::eval::EvaluationConfig;
 use crate::robot::{Chain, Payload, urdf};
+use crate::study::StudyConfig;
 use crate::tracker::TrackerConfig;
 use crate::tracker::reflector::ReflectorConfig;
 use crate::truth::ErrorModel;
@@ -30,6 +31,9 @@ pub struct Scenario {
     /// What to fit on the campaign and how to judge it; no evaluation when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationConfig>,
+    /// The sweep over training-set sizes, layouts, methods and seeds; no study when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub study: Option<StudyConfig>,
     /// Where the scenario came from (its path), for messages; not part of the file.
     #[serde(skip)]
     pub origin: String,
@@ -149,6 +153,11 @@ impl Scenario {
             evaluation
                 .validate()
                 .map_err(|m| format!("evaluation: {m}"))?;
+        }
+        if let Some(study) = &self.study {
+            study
+                .validate(&self.regions)
+                .map_err(|m| format!("study.{m}"))?;
         }
         Ok(())
     }

@@ -116,6 +116,8 @@ fn synthetic(errors: &FrameErrors, n: usize, seed: u64, extra: &Extra) -> Synthe
         nominal_flange: None,
         split: None,
         regions: None,
+        measured_orientation: None,
+        extra_inputs: None,
     };
     Synthetic {
         chain,

@@ -107,6 +107,8 @@ fn synthetic(errors: &FrameErrors, field: Field, nest: bool, n: usize, seed: u64
         nominal_flange: None,
         split: None,
         regions: None,
+        measured_orientation: None,
+        extra_inputs: None,
     };
     Synthetic {
         chain,

@@ -1,6 +1,10 @@
 //! `calibrate --data FILE.csv [--robot URDF] [--method M] [--truth truth.csv] [--out DIR]`: fits a calibration
-//! method on measured data, prints the paper's Table 1 (and Table 2 with a reflector nest) for the test split,
-//! and writes `report.json`, `model.json` and `predictions.csv`.
+//! method on measured data, prints the paper's Table 1 (and Table 2 with measured orientation) for the test
+//! split, and writes `report.json`, `model.json` and `predictions.csv`.
+//!
+//! `--mapping FILE.toml` reads a foreign export (delimiter, decimal comma, units, orientation convention; see
+//! `calibench::dataset::mapping`); `--test-data FILE` fits on all of `--data` (train and validation) and tests
+//! on another campaign, re-registering its tracker frame and probe mounting on its own points.
 //!
 //! `calibrate apply --model model.json --data FILE.csv [--out FILE]`: predicted poses and corrected joint
 //! commands for new joint configurations.
@@ -17,8 +21,10 @@ use serde_json::json;
 use calibench::calib::method::{self, FitContext, Fitted, MethodKind, SavedModel};
 use calibench::calib::regression::RegressionOptions;
 use calibench::calib::tracker_frame::Observation;
-use calibench::dataset::{Dataset, Split, Truth, random_split};
+use calibench::dataset::mapping::ColumnMapping;
+use calibench::dataset::{Dataset, Split, Truth, random_split, random_train_val};
 use calibench::eval::Stats;
+use calibench::eval::transfer::{self, TestRegistration};
 use calibench::robot::dh::DhChain;
 use calibench::robot::{Payload, urdf};
 use calibench::{Error, Result, output};
@@ -44,9 +50,27 @@ enum Command {
 
 #[derive(Args, Debug)]
 struct FitArgs {
-    /// Measurements (the `measurements.csv` format; see results/README.md).
+    /// Measurements (the `measurements.csv` format; see results/README.md), or any export with `--mapping`.
     #[arg(long)]
     data: Option<PathBuf>,
+    /// A column mapping (TOML) for reading a foreign export: columns, delimiter, decimal separator, units,
+    /// orientation convention, extra inputs. See `mappings/ipa_ur10.toml`.
+    #[arg(long)]
+    mapping: Option<PathBuf>,
+    /// Test on this campaign instead of a test split of `--data` (which then splits into training and
+    /// validation only, in the ratio of the first two `--split` fractions).
+    #[arg(long)]
+    test_data: Option<PathBuf>,
+    /// The mapping of `--test-data` [default: `--mapping`].
+    #[arg(long)]
+    test_mapping: Option<PathBuf>,
+    /// refit: register the test campaign's tracker frame and probe mounting on its own points (another
+    /// station, another day); model: use the model's registration (same station and probe).
+    #[arg(long, default_value = "refit")]
+    test_registration: String,
+    /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
+    #[arg(long)]
+    ignore_inputs: bool,
     /// The robot's URDF; its joint names name the joint columns.
     #[arg(long, default_value = "robots/iiwa7.urdf")]
     robot: PathBuf,
@@ -91,6 +115,10 @@ struct ApplyArgs {
     /// Joint configurations: a CSV with one column per joint of the model (extra columns are ignored).
     #[arg(long)]
     data: PathBuf,
+    /// A column mapping (TOML) for reading `--data` (only its joint columns and `point_id` are used; extra
+    /// inputs such as the temperature take their training means).
+    #[arg(long)]
+    mapping: Option<PathBuf>,
     /// Output CSV.
     #[arg(long, default_value = "results/calibrate/applied.csv")]
     out: PathBuf,
@@ -180,7 +208,7 @@ fn errors(model: &dyn Fitted, observations: &[Observation]) -> Errors {
     };
     for o in observations {
         let (nominal_p, nominal_r) = model.nominal(&o.q);
-        let pred = model.predict(&o.q);
+        let pred = model.predict_with(&o.q, &o.inputs);
         e.before.push((o.position - nominal_p).norm());
         e.after.push((o.position - pred.position).norm());
         e.linearized
@@ -232,22 +260,53 @@ fn fit(args: &FitArgs) -> Result<()> {
     };
     let chain = urdf::load_file(&args.robot, args.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
-    let data = Dataset::read(data_path, &chain.joint_names())?;
+    let mapping = args
+        .mapping
+        .as_deref()
+        .map(ColumnMapping::load)
+        .transpose()?;
+    let read = |path: &Path, mapping: Option<&ColumnMapping>| -> Result<Dataset> {
+        let mut data = match mapping {
+            Some(m) => m.read(path, &chain)?,
+            None => Dataset::read(path, &chain.joint_names())?,
+        };
+        if args.ignore_inputs {
+            data.extra_inputs = None;
+        }
+        Ok(data)
+    };
+    let data = read(data_path, mapping.as_ref())?;
+    let test_file = match &args.test_data {
+        Some(path) => {
+            let test_mapping = match &args.test_mapping {
+                Some(p) => Some(ColumnMapping::load(p)?),
+                None => mapping.clone(),
+            };
+            Some(read(path, test_mapping.as_ref())?)
+        }
+        None => None,
+    };
+    let test_mode = TestRegistration::parse(&args.test_registration)?;
+    if test_file.is_some() && args.truth.is_some() {
+        return Err(Error::Invalid(
+            "--truth belongs to the test split of --data; it cannot be combined with --test-data"
+                .into(),
+        ));
+    }
     let truth = match &args.truth {
         Some(path) => Some(Truth::read(path)?.aligned_to(&data)?),
         None => None,
     };
-    let labels = match &data.split {
-        Some(labels) => labels.clone(),
-        None => {
-            let f: [f64; 3] = args.split.as_slice().try_into().map_err(|_| {
-                Error::Invalid(format!(
-                    "--split needs three fractions (train,val,test), got {}",
-                    args.split.len()
-                ))
-            })?;
-            random_split(data.len(), f, args.seed)?
-        }
+    let f: [f64; 3] = args.split.as_slice().try_into().map_err(|_| {
+        Error::Invalid(format!(
+            "--split needs three fractions (train,val,test), got {}",
+            args.split.len()
+        ))
+    })?;
+    let labels = match (&data.split, &test_file) {
+        (Some(labels), _) => labels.clone(),
+        (None, None) => random_split(data.len(), f, args.seed)?,
+        (None, Some(_)) => random_train_val(data.len(), f[0] / (f[0] + f[1]), args.seed)?,
     };
     let indices =
         |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
@@ -256,14 +315,14 @@ fn fit(args: &FitArgs) -> Result<()> {
         indices(Split::Val),
         indices(Split::Test),
     );
-    if i_test.is_empty() {
+    if i_test.is_empty() && test_file.is_none() {
         return Err(Error::Invalid("the test split is empty".into()));
     }
-    let (train, val, test) = (
-        data.subset(&i_train),
-        data.subset(&i_val),
-        data.subset(&i_test),
-    );
+    let (train, val) = (data.subset(&i_train), data.subset(&i_val));
+    let test = match &test_file {
+        Some(t) => t.clone(),
+        None => data.subset(&i_test),
+    };
     let options = RegressionOptions {
         max_degree: args.max_degree,
         cross_terms: args.cross_terms,
@@ -281,8 +340,41 @@ fn fit(args: &FitArgs) -> Result<()> {
     let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
-    let obs_test = model.registration().observe(&test)?;
-    let test_errors = errors(model, &obs_test);
+    let (obs_test, test_errors, test_registration) = match &test_file {
+        None => {
+            let obs = model.registration().observe(&test)?;
+            let e = errors(model, &obs);
+            (obs, e, None)
+        }
+        Some(t) => {
+            let after = transfer::evaluate(model, t, test_mode)?;
+            // "Before": the nominal kinematics, registered on the test campaign the same way.
+            let nominal = match kind {
+                MethodKind::Nominal => None,
+                _ => Some(method::fit(MethodKind::Nominal, &ctx, &train, &val)?),
+            };
+            let before = transfer::evaluate(nominal.as_deref().unwrap_or(model), t, test_mode)?;
+            let obs = after.registration.observe(t)?;
+            let fitted_on_test = after.describe();
+            let e = Errors {
+                before: before.errors.position,
+                after: after.errors.position.clone(),
+                linearized: after.errors.position,
+                orientation_before: before.errors.orientation,
+                orientation_after: after.errors.orientation,
+            };
+            let r = &after.registration;
+            let described = json!({
+                "mode": test_mode,
+                "fitted_on_test_data": fitted_on_test,
+                "tracker_to_base": r.frame.tracker_to_base,
+                "mounting_m": r.frame.mounting,
+                "probe_rotation": r.probe_rotation,
+                "rms_mm": r.frame.rms * 1e3,
+            });
+            (obs, e, Some(described))
+        }
+    };
     let registration = model.registration();
     let mut report = json!({
         "method": model.method(),
@@ -295,10 +387,22 @@ fn fit(args: &FitArgs) -> Result<()> {
         "registration": {
             "tracker_to_base": registration.frame.tracker_to_base,
             "mounting_m": registration.frame.mounting,
+            "probe_rotation": registration.probe_rotation,
             "rms_mm": registration.frame.rms * 1e3,
         },
         "test": errors_json(&test_errors)?,
     });
+    let fitted_on_test = test_registration
+        .as_ref()
+        .and_then(|d| d["fitted_on_test_data"].as_str())
+        .map(String::from);
+    if let Some(described) = test_registration {
+        report["test_data"] = json!(test.origin);
+        report["test_registration"] = described;
+    }
+    if !model.input_names().is_empty() {
+        report["extra_inputs"] = json!(model.input_names());
+    }
     // The method's own facts (kept parameters, R², rank, …) sit at the top level beside the common ones.
     if let (Some(target), serde_json::Value::Object(extra)) =
         (report.as_object_mut(), model.report(&obs_test))
@@ -326,7 +430,11 @@ fn fit(args: &FitArgs) -> Result<()> {
         ],
     )?;
 
-    print_tables(model.method(), &test_errors, truth_errors.as_ref())?;
+    let what = match (&test_file, fitted_on_test) {
+        (Some(t), Some(fitted)) => format!("on {}; fitted on it: {fitted}", t.origin),
+        _ => "on the test split".to_string(),
+    };
+    print_tables(model.method(), &what, &test_errors, truth_errors.as_ref())?;
     println!(
         "fit on {} training + {} validation points in {fit_ms:.1} ms; wrote {}",
         train.len(),
@@ -362,7 +470,7 @@ fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Resu
     .iter()
     .map(|s| s.to_string())
     .collect::<Vec<_>>();
-    let with_orientation = model.registration().nest.is_some();
+    let with_orientation = model.registration().measures_orientation();
     if with_orientation {
         header.extend(
             [
@@ -379,7 +487,7 @@ fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Resu
     w.write_record(&header).map_err(csv_err)?;
     for ((id, o), label) in data.point_ids.iter().zip(&observations).zip(labels) {
         let (np, nr) = model.nominal(&o.q);
-        let p = model.predict(&o.q);
+        let p = model.predict_with(&o.q, &o.inputs);
         let mut row = vec![id.clone(), format!("{label:?}").to_lowercase()];
         for v in [o.position.coords, np.coords, p.position.coords] {
             row.extend(v.iter().map(|x| x.to_string()));
@@ -399,7 +507,7 @@ fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Resu
         .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
 }
 
-fn print_tables(method: &str, test: &Errors, truth: Option<&Errors>) -> Result<()> {
+fn print_tables(method: &str, what: &str, test: &Errors, truth: Option<&Errors>) -> Result<()> {
     let table =
         |title: &str, unit: &str, before: &[f64], after: &[f64], scale: f64| -> Result<()> {
             let (b, a) = (
@@ -420,7 +528,7 @@ fn print_tables(method: &str, test: &Errors, truth: Option<&Errors>) -> Result<(
             Ok(())
         };
     table(
-        "Table 1. Positional errors on the test split",
+        &format!("Table 1. Positional errors {what}"),
         "mm",
         &test.before,
         &test.after,
@@ -428,7 +536,7 @@ fn print_tables(method: &str, test: &Errors, truth: Option<&Errors>) -> Result<(
     )?;
     if !test.orientation_before.is_empty() {
         table(
-            "Table 2. Orientational errors on the test split",
+            &format!("Table 2. Orientational errors {what}"),
             "rad",
             &test.orientation_before,
             &test.orientation_after,
@@ -467,7 +575,13 @@ fn apply(args: &ApplyArgs) -> Result<()> {
     })?;
     let model = saved.into_fitted();
     let joint_names = model.joint_names().to_vec();
-    let (ids, configurations) = calibench::dataset::read_joints(&args.data, &joint_names)?;
+    let (ids, configurations) = match &args.mapping {
+        Some(path) => {
+            let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+            ColumnMapping::load(path)?.read_joints(&args.data, &joint_names, &prismatic)?
+        }
+        None => calibench::dataset::read_joints(&args.data, &joint_names)?,
+    };
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", args.out.display()));
     let mut header: Vec<String> = vec!["point_id".into()];

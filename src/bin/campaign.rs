@@ -12,11 +12,12 @@ use serde_json::json;
 
 use calibench::eval::{Budget, Stats};
 use calibench::scenario::Scenario;
+use calibench::study::sweep::{Progress, run_study};
 use calibench::tracker::Tracker;
-use calibench::{Error, Result, campaign, eval, measurements, output};
+use calibench::{Error, Result, campaign, eval, measurements, output, report};
 
-/// The scenario run when none is given: the paper's first data set.
-const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/paper_iiwa.toml");
+/// The scenario run when none is given: the study a user should run first.
+const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
 
 #[derive(Parser, Debug)]
 #[command(
@@ -32,6 +33,11 @@ struct Args {
     /// Worker threads (the results do not depend on it) [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
+    /// Fill the study's `fit_ms` column with wall-clock fit times. Off by default so that `metrics.csv` and
+    /// `summary.md` are byte-identical for the same scenario whatever the machine and thread count; the
+    /// benchmarks (`cargo bench`) measure fit times properly.
+    #[arg(long)]
+    timings: bool,
 }
 
 fn main() -> ExitCode {
@@ -57,7 +63,7 @@ fn run(args: &Args) -> Result<()> {
     }
     let scenario = match &args.scenario {
         Some(path) => Scenario::load(path)?,
-        None => Scenario::parse(DEFAULT_SCENARIO, "embedded paper_iiwa.toml")?,
+        None => Scenario::parse(DEFAULT_SCENARIO, "embedded default.toml")?,
     };
     let started = Instant::now();
     let sim = campaign::simulate(&scenario)?;
@@ -94,13 +100,13 @@ fn run(args: &Args) -> Result<()> {
     });
     let json = serde_json::to_vec_pretty(&report)
         .map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
-    let mut files = vec![
+    let mut files: Vec<(String, Vec<u8>)> = vec![
         (
-            "measurements.csv",
+            "measurements.csv".into(),
             measurements::measurements_csv(campaign)?,
         ),
-        ("truth.csv", measurements::truth_csv(campaign)?),
-        ("campaign.json", json),
+        ("truth.csv".into(), measurements::truth_csv(campaign)?),
+        ("campaign.json".into(), json),
     ];
     let evaluation = match &scenario.evaluation {
         Some(config) => {
@@ -108,8 +114,28 @@ fn run(args: &Args) -> Result<()> {
             let evaluation = eval::evaluate(&scenario, &sim, config)?;
             let json = serde_json::to_vec_pretty(&evaluation)
                 .map_err(|e| Error::Invalid(format!("evaluation.json: {e}")))?;
-            files.push(("evaluation.json", json));
+            files.push(("evaluation.json".into(), json));
             Some((evaluation, started.elapsed()))
+        }
+        None => None,
+    };
+    let study = match &scenario.study {
+        Some(_) => {
+            let started = Instant::now();
+            let mut study = run_study(&scenario, Progress::Auto)?;
+            if !args.timings {
+                study.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
+            }
+            let summary = report::summary::summary_md(&study)?;
+            files.push(("metrics.csv".into(), report::summary::metrics_csv(&study)?));
+            files.extend(report::plots::learning_curves_png(&study)?);
+            files.extend(report::plots::histograms_png(&study)?);
+            files.push((
+                "campaign.rrd".into(),
+                report::recording::record(&study, &sim.nominal, &summary)?,
+            ));
+            files.push(("summary.md".into(), summary.into_bytes()));
+            Some((study, started.elapsed()))
         }
         None => None,
     };
@@ -153,6 +179,16 @@ fn run(args: &Args) -> Result<()> {
         println!(
             "evaluated {} methods in {:.2} s",
             evaluation.methods.len(),
+            took.as_secs_f64()
+        );
+    }
+    if let Some((study, took)) = &study {
+        let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
+        println!(
+            "study: {} runs ({} failed, reasons in metrics.csv) in {:.1} s; see summary.md, plots/ and campaign.rrd \
+             (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
+            study.runs.len(),
+            failed,
             took.as_secs_f64()
         );
     }

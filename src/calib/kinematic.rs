@@ -25,9 +25,10 @@
 //! Jacobian (columns scaled to unit norm) give the rank and condition number that `report()` shows, and a
 //! rank below the set's size is refused with the least determined parameters named.
 //!
-//! **Reflector nests.** With three reflectors the measured flange orientation is fitted too; a rotation
-//! residual φ (rad) is weighted by the nest's RMS radius r (m), i.e. as the displacement `r·φ` it causes at the
-//! reflectors, the quantity the tracker actually measured.
+//! **Reflector nests and 6-DoF probes.** With three reflectors the measured flange orientation is fitted too; a
+//! rotation residual φ (rad) is weighted by the nest's RMS radius r (m), i.e. as the displacement `r·φ` it causes
+//! at the reflectors, the quantity the tracker actually measured. A 6-DoF probe's orientation is fitted the same
+//! way with r = [`PROBE_ORIENTATION_LENGTH_M`](super::tracker_frame::PROBE_ORIENTATION_LENGTH_M).
 //!
 //! **Solver.** Levenberg–Marquardt as MINPACK's `lmder` does it (trust region, Gauss–Newton steps whenever
 //! they fit), written here on the k × k normal equations in coordinates whitened by the starting Jacobian
@@ -794,9 +795,7 @@ impl KinematicModel {
         } else {
             None
         };
-        let length = registration.nest.as_ref().map(|nest| {
-            (nest.iter().map(|p| p.coords.norm_squared()).sum::<f64>() / nest.len() as f64).sqrt()
-        });
+        let length = registration.orientation_length();
         let to_points = |obs: Vec<Observation>| -> Vec<Point> {
             obs.into_iter()
                 .map(|o| Point {
@@ -905,6 +904,7 @@ impl KinematicModel {
                     evaluations: minimum.evaluations,
                 },
                 nest: registration.nest,
+                probe_rotation: registration.probe_rotation,
             },
             errors: state.errors.clone(),
             compliance: elastic.then(|| state.compliance.clone()),
@@ -1008,7 +1008,7 @@ impl Fitted for KinematicModel {
     }
 
     fn models_orientation(&self) -> bool {
-        self.registration.nest.is_some()
+        self.registration.measures_orientation()
     }
 
     fn report(&self, test: &[Observation]) -> serde_json::Value {

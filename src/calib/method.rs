@@ -2,7 +2,7 @@
 //! predict the measured point and the flange orientation for joint angles, and invert — the joint command
 //! that makes the calibrated model reach a target, which is what a controller is sent.
 
-use nalgebra::{DMatrix, DVector, Point3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::kinematic::KinematicModel;
@@ -103,7 +103,31 @@ pub trait Fitted: Send + Sync {
     fn joint_names(&self) -> &[String];
     /// The nominal kinematics the method corrects.
     fn dh(&self) -> &DhChain;
+    /// The prediction at `q`; a method that regresses on extra inputs ([`Fitted::input_names`]) takes them at
+    /// their training means.
     fn predict(&self, q: &[f64]) -> Prediction;
+    /// Names of the inputs beyond the joint angles that the model was given (e.g. `temperature`), in the order
+    /// [`Fitted::predict_with`] takes their values; empty for a method that uses none.
+    fn input_names(&self) -> &[String] {
+        &[]
+    }
+    /// The prediction at `q` with the point's extra inputs (in [`Fitted::input_names`] order; empty: their
+    /// training means). A method that uses none ignores them.
+    fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
+        let _ = inputs;
+        self.predict(q)
+    }
+    /// The calibrated flange pose the prediction implies: the predicted orientation, placed so that it carries
+    /// the mounting onto the predicted point. For a rigid model this is the model's own flange; an evaluation
+    /// uses it to put the measured point elsewhere on the flange (a probe remounted between campaigns).
+    fn predicted_flange(&self, q: &[f64], inputs: &[f64]) -> Isometry3<f64> {
+        let p = self.predict_with(q, inputs);
+        let m = self.registration().frame.mounting.coords;
+        Isometry3::from_parts(
+            Translation3::from(p.position.coords - p.orientation * m),
+            p.orientation,
+        )
+    }
     /// Whether the method models the flange orientation (else its predicted orientation is the nominal one).
     fn models_orientation(&self) -> bool {
         false

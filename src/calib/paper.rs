@@ -46,8 +46,15 @@ pub struct PaperModel {
     /// The nominal kinematics the model corrects (DH form of the robot's URDF).
     pub dh: DhChain,
     pub registration: Registration,
-    /// Names of the regression's candidate inputs: the joint angles (rad), then the nominal TCP x, y, z (m).
+    /// Names of the regression's candidate inputs: the joint angles (rad), the nominal TCP x, y, z (m), then
+    /// the data's extra inputs (`extra_inputs`).
     pub candidates: Vec<String>,
+    /// The data's inputs beyond the joint angles (e.g. `temperature`), offered to the regression.
+    #[serde(default)]
+    pub extra_inputs: Vec<String>,
+    /// Their training means: what [`Fitted::predict`] assumes when it is not told them.
+    #[serde(default)]
+    pub extra_input_means: Vec<f64>,
     pub position: Vec<ParameterModel>,
     pub orientation: Vec<ParameterModel>,
 }
@@ -85,6 +92,22 @@ impl PaperModel {
         }
         let dh = ctx.dh;
         let registration = Registration::fit(dh, train, val)?;
+        let extra_inputs = train.extra_input_names().to_vec();
+        if val.extra_input_names() != extra_inputs.as_slice() {
+            return Err(Error::Invalid(format!(
+                "the training data has extra inputs [{}], the validation data [{}]",
+                extra_inputs.join(", "),
+                val.extra_input_names().join(", ")
+            )));
+        }
+        let extra_input_means = (0..extra_inputs.len())
+            .map(|k| {
+                (0..train.len())
+                    .map(|i| train.extra_inputs_of(i)[k])
+                    .sum::<f64>()
+                    / train.len() as f64
+            })
+            .collect();
         let mut model = PaperModel {
             method: method_name(kind).to_string(),
             kind,
@@ -96,7 +119,10 @@ impl PaperModel {
                 .iter()
                 .cloned()
                 .chain(["tcp_x", "tcp_y", "tcp_z"].map(String::from))
+                .chain(extra_inputs.iter().cloned())
                 .collect(),
+            extra_inputs,
+            extra_input_means,
             position: Vec::new(),
             orientation: Vec::new(),
         };
@@ -117,7 +143,7 @@ impl PaperModel {
                 method_name(Some(kind))
             )));
         }
-        let orientation_params = if model.registration.nest.is_some() {
+        let orientation_params = if model.registration.measures_orientation() {
             selection.orientation_only.clone()
         } else {
             Vec::new()
@@ -208,23 +234,39 @@ impl PaperModel {
         id
     }
 
-    /// Regression inputs of each observation: joint angles, then the nominal TCP position.
+    /// Regression inputs of each observation: joint angles, the nominal TCP position, the extra inputs.
     fn candidate_matrix(&self, observations: &[Observation]) -> DMatrix<f64> {
         let rows: Vec<Vec<f64>> = observations
             .iter()
-            .map(|o| self.candidates_of(&o.q))
+            .map(|o| self.candidates_of(&o.q, &o.inputs))
             .collect();
         DMatrix::from_fn(rows.len(), self.candidates.len(), |r, c| rows[r][c])
     }
 
-    fn candidates_of(&self, q: &[f64]) -> Vec<f64> {
+    /// `inputs`: the extra inputs in `extra_inputs` order; any other length (empty) stands for their
+    /// training means.
+    fn candidates_of(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
         let tcp = self.dh.flange_pose(q) * self.registration.frame.mounting;
-        q.iter().copied().chain([tcp.x, tcp.y, tcp.z]).collect()
+        let extra = if inputs.len() == self.extra_inputs.len() {
+            inputs
+        } else {
+            &self.extra_input_means
+        };
+        q.iter()
+            .copied()
+            .chain([tcp.x, tcp.y, tcp.z])
+            .chain(extra.iter().copied())
+            .collect()
     }
 
-    /// Modelled error parameters at configuration `q`.
+    /// Modelled error parameters at configuration `q` (extra inputs at their training means).
     pub fn parameters(&self, q: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let x = self.candidates_of(q);
+        self.parameters_with(q, &[])
+    }
+
+    /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
+    pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let x = self.candidates_of(q, inputs);
         let eval = |models: &[ParameterModel]| models.iter().map(|m| m.model.predict(&x)).collect();
         (eval(&self.position), eval(&self.orientation))
     }
@@ -234,9 +276,9 @@ impl PaperModel {
         frame_errors(self.dh.dof(), &params, values)
     }
 
-    /// Predicted measured point and flange orientation for configuration `q`.
-    fn prediction(&self, q: &[f64]) -> Prediction {
-        let (ep, eo) = self.parameters(q);
+    /// Predicted measured point and flange orientation for configuration `q` and extra inputs `inputs`.
+    fn prediction(&self, q: &[f64], inputs: &[f64]) -> Prediction {
+        let (ep, eo) = self.parameters_with(q, inputs);
         let nominal = self.dh.flange_pose(q);
         let position =
             flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.position, &ep))
@@ -290,7 +332,34 @@ impl Fitted for PaperModel {
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
-        self.prediction(q)
+        self.prediction(q, &[])
+    }
+
+    fn input_names(&self) -> &[String] {
+        &self.extra_inputs
+    }
+
+    fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
+        self.prediction(q, inputs)
+    }
+
+    /// Without orientation parameters the flange turns as the position parameters turn it (their frames are
+    /// rigid), so a point elsewhere on the flange moves with them.
+    fn predicted_flange(&self, q: &[f64], inputs: &[f64]) -> nalgebra::Isometry3<f64> {
+        let (ep, eo) = self.parameters_with(q, inputs);
+        let position =
+            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.position, &ep));
+        if self.orientation.is_empty() {
+            return position;
+        }
+        let rotation =
+            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.orientation, &eo))
+                .rotation;
+        let m = self.registration.frame.mounting;
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from((position * m).coords - rotation * m.coords),
+            rotation,
+        )
     }
 
     fn models_orientation(&self) -> bool {
@@ -303,8 +372,10 @@ impl Fitted for PaperModel {
         let pos: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
         let ori: Vec<ErrorParam> = self.orientation.iter().map(|m| m.param).collect();
         let id = self.identify(test, &pos, &ori);
-        let modelled: Vec<(Vec<f64>, Vec<f64>)> =
-            test.iter().map(|o| self.parameters(&o.q)).collect();
+        let modelled: Vec<(Vec<f64>, Vec<f64>)> = test
+            .iter()
+            .map(|o| self.parameters_with(&o.q, &o.inputs))
+            .collect();
         let mut r2s = serde_json::Map::new();
         for (models, identified, group) in [
             (&self.position, &id.position, 0),

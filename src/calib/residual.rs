@@ -30,7 +30,7 @@ use serde_json::json;
 use super::method::{FitContext, Fitted, MethodKind, Prediction, SavedModel, fit};
 use super::registration::centre;
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
-use super::tracker_frame::{Observation, Registration, fit_tracker_frame};
+use super::tracker_frame::{Observation, Registration, fit_tracker_frame, probe_rotation};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
@@ -59,11 +59,15 @@ pub struct ComponentModel {
     pub model: RidgeModel,
 }
 
-/// Ridge models of the residual of some reference prediction, on the joint angles.
+/// Ridge models of the residual of some reference prediction, on the joint angles (and the data's extra inputs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ResidualCorrection {
-    /// Names of the regression's candidate inputs: the joint angles (rad).
+    /// Names of the regression's candidate inputs: the joint angles (rad), then the data's extra inputs.
     pub candidates: Vec<String>,
+    /// Training means of the extra inputs (the candidates after the joints): what a prediction assumes when
+    /// it is not told them.
+    #[serde(default)]
+    pub input_means: Vec<f64>,
     /// `dx`, `dy`, `dz`: added to the reference's measured point.
     pub position: Vec<ComponentModel>,
     /// `rx`, `ry`, `rz` (with a reflector nest, else empty): the rotation `exp(r)` applied on the left of
@@ -97,15 +101,19 @@ fn zero_model(validation_r2: f64) -> RidgeModel {
     }
 }
 
-fn joint_matrix(observations: &[Observation], dof: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(observations.len(), dof, |r, c| observations[r].q[c])
+/// Candidate rows: the joint angles, then the extra inputs.
+fn candidate_matrix(observations: &[Observation], dof: usize, extra: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(observations.len(), dof + extra, |r, c| {
+        let o = &observations[r];
+        if c < dof { o.q[c] } else { o.inputs[c - dof] }
+    })
 }
 
-fn eval(models: &[ComponentModel], q: &[f64]) -> Vector3<f64> {
+fn eval(models: &[ComponentModel], x: &[f64]) -> Vector3<f64> {
     Vector3::new(
-        models[0].model.predict(q),
-        models[1].model.predict(q),
-        models[2].model.predict(q),
+        models[0].model.predict(x),
+        models[1].model.predict(x),
+        models[2].model.predict(x),
     )
 }
 
@@ -125,9 +133,11 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
 
 impl ResidualCorrection {
     /// Fits the residuals of `train` against `reference`, choosing on `val`. The orientation is modelled when
-    /// `orientation` is set and every training and validation observation measures it.
+    /// `orientation` is set and every training and validation observation measures it. `extra_inputs`: names
+    /// of the observations' inputs beyond the joint angles, offered to the regression as candidates.
     pub fn fit(
         joint_names: &[String],
+        extra_inputs: &[String],
         reference: &dyn Fn(&[f64]) -> Reference,
         train: &[Observation],
         val: &[Observation],
@@ -141,6 +151,17 @@ impl ResidualCorrection {
                 o.q.len()
             )));
         }
+        let extra = extra_inputs.len();
+        if let Some(o) = train.iter().chain(val).find(|o| o.inputs.len() != extra) {
+            return Err(Error::Invalid(format!(
+                "residual model: a point has {} extra inputs, the model {extra} ({})",
+                o.inputs.len(),
+                extra_inputs.join(", ")
+            )));
+        }
+        let input_means: Vec<f64> = (0..extra)
+            .map(|k| train.iter().map(|o| o.inputs[k]).sum::<f64>() / train.len().max(1) as f64)
+            .collect();
         let refs_train: Vec<Reference> = train.iter().map(|o| reference(&o.q)).collect();
         let refs_val: Vec<Reference> = val.iter().map(|o| reference(&o.q)).collect();
         let res = |obs: &[Observation], refs: &[Reference]| -> Vec<_> {
@@ -152,7 +173,10 @@ impl ResidualCorrection {
         let (res_train, res_val) = (res(train, &refs_train), res(val, &refs_val));
         let with_orientation =
             orientation && res_train.iter().chain(&res_val).all(|r| r.1.is_some());
-        let (x_train, x_val) = (joint_matrix(train, dof), joint_matrix(val, dof));
+        let (x_train, x_val) = (
+            candidate_matrix(train, dof, extra),
+            candidate_matrix(val, dof, extra),
+        );
         let regress = |names: [&str; 3],
                        component: &dyn Fn(&Residual) -> Vector3<f64>|
          -> Result<Vec<ComponentModel>> {
@@ -167,8 +191,9 @@ impl ResidualCorrection {
                 .map(|(k, (name, model))| {
                     // No worse than no correction, in the validation sum of squares.
                     let y: Vec<f64> = y_val.column(k).iter().copied().collect();
-                    let fitted: Vec<f64> =
-                        (0..val.len()).map(|r| model.predict(&val[r].q)).collect();
+                    let fitted: Vec<f64> = (0..val.len())
+                        .map(|r| model.predict(x_val.row(r).transpose().as_slice()))
+                        .collect();
                     let sse_model: f64 = y.iter().zip(&fitted).map(|(a, b)| (a - b).powi(2)).sum();
                     let sse_zero: f64 = y.iter().map(|a| a * a).sum();
                     let kept = sse_model < sse_zero;
@@ -185,7 +210,8 @@ impl ResidualCorrection {
                 .collect())
         };
         let mut correction = ResidualCorrection {
-            candidates: joint_names.to_vec(),
+            candidates: joint_names.iter().chain(extra_inputs).cloned().collect(),
+            input_means,
             position: regress(POSITION_NAMES, &|r| r.0)?,
             orientation: if with_orientation {
                 regress(ORIENTATION_NAMES, &|r| r.1.unwrap_or_default())?
@@ -203,7 +229,7 @@ impl ResidualCorrection {
         let corrected: Vec<Reference> = val
             .iter()
             .zip(refs)
-            .map(|(o, r)| self.apply(&o.q, r))
+            .map(|(o, r)| self.apply(&o.q, &o.inputs, r))
             .collect();
         let distance =
             |rs: &[Reference]| mean(val.iter().zip(rs).map(|(o, r)| (o.position - r.0).norm()));
@@ -232,22 +258,44 @@ impl ResidualCorrection {
         }
     }
 
-    /// The modelled position offset and rotation vector at `q`.
-    pub fn correction(&self, q: &[f64]) -> (Vector3<f64>, Option<Vector3<f64>>) {
+    /// Names of the extra inputs (the candidates after the joint angles).
+    pub fn extra_inputs(&self) -> &[String] {
+        &self.candidates[self.candidates.len() - self.input_means.len()..]
+    }
+
+    /// The candidate row at `q` with extra inputs `inputs` (any other length than the model's, e.g. empty:
+    /// their training means).
+    fn row(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
+        let extra = if inputs.len() == self.input_means.len() {
+            inputs
+        } else {
+            &self.input_means
+        };
+        q.iter().chain(extra).copied().collect()
+    }
+
+    /// The modelled position offset and rotation vector at `q` with extra inputs `inputs` (empty: their means).
+    pub fn correction(&self, q: &[f64], inputs: &[f64]) -> (Vector3<f64>, Option<Vector3<f64>>) {
+        let x = self.row(q, inputs);
         (
-            eval(&self.position, q),
-            (!self.orientation.is_empty()).then(|| eval(&self.orientation, q)),
+            eval(&self.position, &x),
+            (!self.orientation.is_empty()).then(|| eval(&self.orientation, &x)),
         )
     }
 
-    /// `reference` corrected at `q`.
-    pub fn apply(&self, q: &[f64], reference: &Reference) -> Reference {
-        self.apply_with_offset(q, reference).0
+    /// `reference` corrected at `q` with extra inputs `inputs`.
+    pub fn apply(&self, q: &[f64], inputs: &[f64], reference: &Reference) -> Reference {
+        self.apply_with_offset(q, inputs, reference).0
     }
 
     /// `reference` corrected at `q`, and the position offset added.
-    fn apply_with_offset(&self, q: &[f64], reference: &Reference) -> (Reference, Vector3<f64>) {
-        let (dp, dw) = self.correction(q);
+    fn apply_with_offset(
+        &self,
+        q: &[f64],
+        inputs: &[f64],
+        reference: &Reference,
+    ) -> (Reference, Vector3<f64>) {
+        let (dp, dw) = self.correction(q, inputs);
         // A zero rotation leaves the reference's bits alone, as a zero offset does.
         let orientation = match dw {
             Some(w) if w != Vector3::zeros() => UnitQuaternion::from_scaled_axis(w) * reference.1,
@@ -275,7 +323,7 @@ impl ResidualCorrection {
                     .zip(&res)
                     .filter_map(|(o, (dp, dw))| {
                         let v = if orientation { (*dw)?[k] } else { dp[k] };
-                        Some((v, m.model.predict(&o.q)))
+                        Some((v, m.model.predict(&self.row(&o.q, &o.inputs))))
                     })
                     .unzip();
                 let test_r2 = (!y.is_empty()).then(|| r2(&y, &y_hat));
@@ -329,6 +377,16 @@ impl ResidualModel {
             .map(|m| centre(m))
             .collect();
         let q: Vec<&Vec<f64>> = train.q.iter().chain(&val.q).collect();
+        let inputs: Vec<&[f64]> = (0..train.len())
+            .map(|i| train.extra_inputs_of(i))
+            .chain((0..val.len()).map(|i| val.extra_inputs_of(i)))
+            .collect();
+        let orientations: Option<Vec<UnitQuaternion<f64>>> =
+            match (&train.measured_orientation, &val.measured_orientation) {
+                (Some(a), Some(b)) => Some(a.iter().chain(b).copied().collect()),
+                _ => None,
+            };
+        let extra_inputs = train.extra_input_names().to_vec();
         let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| ctx.dh.flange_pose(q)).collect();
         let mut best: Option<(f64, ResidualModel)> = None;
         let mut stalled = 0;
@@ -337,10 +395,11 @@ impl ResidualModel {
             let reference = |q: &[f64]| nominal_reference(ctx.dh, &registration, q);
             let residual = ResidualCorrection::fit(
                 &train.joint_names,
+                &extra_inputs,
                 &reference,
                 &obs_train,
                 &obs_val,
-                registration.nest.is_some(),
+                registration.measures_orientation(),
                 &ctx.regression,
             )?;
             let model = ResidualModel {
@@ -352,13 +411,13 @@ impl ResidualModel {
             let error = mean(
                 obs_val
                     .iter()
-                    .map(|o| (o.position - model.predict(&o.q).position).norm()),
+                    .map(|o| (o.position - model.predict_with(&o.q, &o.inputs).position).norm()),
             );
             // Register again onto the nominal points plus this round's modelled residual.
             let shifted: Vec<Isometry3<f64>> = flanges
                 .iter()
-                .zip(&q)
-                .map(|(f, q)| Translation3::from(model.residual.correction(q).0) * f)
+                .zip(q.iter().zip(&inputs))
+                .map(|(f, (q, x))| Translation3::from(model.residual.correction(q, x).0) * f)
                 .collect();
             match &best {
                 Some((b, _)) if error >= b * (1.0 - ROUND_GAIN) => stalled += 1,
@@ -372,6 +431,10 @@ impl ResidualModel {
             }
             registration.frame =
                 fit_tracker_frame(&centres, &shifted, &registration.frame.mounting)?;
+            if let (Some(_), Some(measured)) = (registration.probe_rotation, &orientations) {
+                registration.probe_rotation =
+                    Some(probe_rotation(&registration.frame, &flanges, measured)?);
+            }
         }
         Ok(best.expect("at least one round").1)
     }
@@ -404,7 +467,15 @@ impl Fitted for ResidualModel {
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
-        let (position, orientation) = self.residual.apply(q, &self.reference(q));
+        self.predict_with(q, &[])
+    }
+
+    fn input_names(&self) -> &[String] {
+        self.residual.extra_inputs()
+    }
+
+    fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
+        let (position, orientation) = self.residual.apply(q, inputs, &self.reference(q));
         Prediction {
             position,
             linearized_position: position,
@@ -459,12 +530,14 @@ impl HybridModel {
         let registration = base.registration();
         let (obs_train, obs_val) = (registration.observe(train)?, registration.observe(val)?);
         let reference = |q: &[f64]| base_reference(base.as_ref(), q);
+        let extra_inputs = train.extra_input_names().to_vec();
         let residual = ResidualCorrection::fit(
             base.joint_names(),
+            &extra_inputs,
             &reference,
             &obs_train,
             &obs_val,
-            registration.nest.is_some(),
+            registration.measures_orientation(),
             &ctx.regression,
         )?;
         Ok(HybridFitted {
@@ -516,11 +589,21 @@ impl Fitted for HybridFitted {
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
+        self.predict_with(q, &[])
+    }
+
+    fn input_names(&self) -> &[String] {
+        self.saved.residual.extra_inputs()
+    }
+
+    /// The base predicts from the joint angles (its residual was fitted against exactly that); the extra
+    /// inputs go to the residual model.
+    fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let p = self.base.predict(q);
-        let ((position, orientation), dp) = self
-            .saved
-            .residual
-            .apply_with_offset(q, &(p.position, p.orientation));
+        let ((position, orientation), dp) =
+            self.saved
+                .residual
+                .apply_with_offset(q, inputs, &(p.position, p.orientation));
         Prediction {
             position,
             linearized_position: p.linearized_position + dp,

@@ -6,6 +6,12 @@
 //! then refines `T` and `m` together. For a reflector nest the point is the nest centre: a rotation of the
 //! nest about its centre moves no centre, and is a constant rotation of the last frame that the orientation
 //! models carry (the paper's Table 2).
+//!
+//! A 6-DoF probe (a T-Mac: the tracker measures its frame, position and orientation) is the other source of
+//! orientation. Its rotation on the flange is unknown; the registration estimates it as the rotation mean of
+//! `F_i⁻¹·T·O_i` over the registration points (nominal flange `F_i`, measured probe orientation `O_i`, tracker
+//! rotation `T` from the points), so the observed flange orientation `T·O_i·P⁻¹` agrees with the nominal one on
+//! average and the methods model what varies — exactly where a nest's orientation goes.
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
@@ -42,16 +48,26 @@ impl TrackerFrame {
 pub struct Registration {
     pub frame: TrackerFrame,
     pub nest: Option<Vec<Point3<f64>>>,
+    /// A 6-DoF probe's rotation in the flange frame, when the data measures the probe's orientation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_rotation: Option<UnitQuaternion<f64>>,
 }
+
+/// The weight (m/rad) of a 6-DoF probe's rotation residual against its position residual where a method fits
+/// both (`kinematic`): an angle counts as the displacement it causes 0.1 m away, the size of the probe. A
+/// nest uses its own RMS radius.
+pub const PROBE_ORIENTATION_LENGTH_M: f64 = 0.1;
 
 /// One measured point as a method sees it, in the base frame.
 #[derive(Clone, Debug)]
 pub struct Observation {
     pub q: Vec<f64>,
-    /// The measured point (reflector or nest centre), registered into the base frame.
+    /// The measured point (reflector, nest centre or probe origin), registered into the base frame.
     pub position: Point3<f64>,
-    /// The measured flange orientation (nests only).
+    /// The measured flange orientation (a nest or a 6-DoF probe).
     pub orientation: Option<UnitQuaternion<f64>>,
+    /// The point's inputs beyond the joint angles (`Dataset::extra_inputs`; empty without).
+    pub inputs: Vec<f64>,
 }
 
 impl Registration {
@@ -72,14 +88,67 @@ impl Registration {
             }
             _ => Point3::origin(),
         };
+        let frame = fit_tracker_frame(&centres, &flanges, &guess)?;
+        let probe_rotation = match (&train.measured_orientation, &val.measured_orientation) {
+            (Some(a), Some(b)) => Some(probe_rotation(
+                &frame,
+                &flanges,
+                &a.iter().chain(b).copied().collect::<Vec<_>>(),
+            )?),
+            (None, None) => None,
+            _ => {
+                return Err(Error::Invalid(
+                    "registration: the training and validation data must both measure the orientation, or neither"
+                        .into(),
+                ));
+            }
+        };
         Ok(Registration {
-            frame: fit_tracker_frame(&centres, &flanges, &guess)?,
+            frame,
             nest: nest_geometry(dh, train)?,
+            probe_rotation,
         })
     }
 
+    /// Whether observations carry a measured flange orientation (a reflector nest or a 6-DoF probe).
+    pub fn measures_orientation(&self) -> bool {
+        self.nest.is_some() || self.probe_rotation.is_some()
+    }
+
+    /// The length (m) that weighs a rotation residual against a position residual: the nest's RMS radius, or
+    /// [`PROBE_ORIENTATION_LENGTH_M`] for a 6-DoF probe; `None` without measured orientation.
+    pub fn orientation_length(&self) -> Option<f64> {
+        match (&self.nest, self.probe_rotation) {
+            (Some(nest), _) => Some(
+                (nest.iter().map(|p| p.coords.norm_squared()).sum::<f64>() / nest.len() as f64)
+                    .sqrt(),
+            ),
+            (None, Some(_)) => Some(PROBE_ORIENTATION_LENGTH_M),
+            (None, None) => None,
+        }
+    }
+
+    /// The dataset's points as observations: positions, orientations (nest or probe) and extra inputs.
     pub fn observe(&self, data: &Dataset) -> Result<Vec<Observation>> {
-        self.observe_points(&data.q, &data.measured)
+        let mut obs = self.observe_points(&data.q, &data.measured)?;
+        if let (Some(probe), Some(measured)) = (self.probe_rotation, &data.measured_orientation) {
+            for (o, m) in obs.iter_mut().zip(measured) {
+                o.orientation = Some(self.flange_orientation(m, &probe));
+            }
+        }
+        for (i, o) in obs.iter_mut().enumerate() {
+            o.inputs = data.extra_inputs_of(i).to_vec();
+        }
+        Ok(obs)
+    }
+
+    /// The flange orientation (base frame) that a probe orientation measured in the tracker frame implies.
+    pub fn flange_orientation(
+        &self,
+        measured: &UnitQuaternion<f64>,
+        probe: &UnitQuaternion<f64>,
+    ) -> UnitQuaternion<f64> {
+        self.frame.tracker_to_base.rotation * measured * probe.inverse()
     }
 
     /// Measurements (tracker frame, per reflector) of configurations `q`, in the base frame.
@@ -105,10 +174,53 @@ impl Registration {
                     q: q.clone(),
                     position: self.frame.to_base(&centre(points)),
                     orientation,
+                    inputs: Vec::new(),
                 })
             })
             .collect()
     }
+}
+
+/// The probe's rotation in the flange frame: the rotation mean (the chordal L2 mean, the projection of the
+/// summed rotation matrices onto SO(3)) of `F_i⁻¹·T·O_i` over the points.
+pub fn probe_rotation(
+    frame: &TrackerFrame,
+    flanges: &[Isometry3<f64>],
+    measured: &[UnitQuaternion<f64>],
+) -> Result<UnitQuaternion<f64>> {
+    if flanges.len() != measured.len() || measured.is_empty() {
+        return Err(Error::Invalid(format!(
+            "probe rotation: {} measured orientations for {} flange poses",
+            measured.len(),
+            flanges.len()
+        )));
+    }
+    let t = frame.tracker_to_base.rotation;
+    let sum: Matrix3<f64> = flanges
+        .iter()
+        .zip(measured)
+        .map(|(f, o)| {
+            (f.rotation.inverse() * t * o)
+                .to_rotation_matrix()
+                .into_inner()
+        })
+        .sum();
+    mean_rotation(&sum)
+}
+
+/// The rotation nearest (Frobenius) to `sum`, a sum of rotation matrices.
+fn mean_rotation(sum: &Matrix3<f64>) -> Result<UnitQuaternion<f64>> {
+    let svd = sum.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Err(Error::Invalid(
+            "probe rotation: SVD returned no basis".into(),
+        ));
+    };
+    let d = (u * v_t).determinant().signum();
+    let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
+    Ok(UnitQuaternion::from_rotation_matrix(
+        &nalgebra::Rotation3::from_matrix_unchecked(r),
+    ))
 }
 
 /// The nest about its centre in the flange frame, from the nominal reflector positions of the first point.
@@ -137,6 +249,52 @@ pub fn fit_tracker_frame(
     flanges: &[Isometry3<f64>],
     mounting_guess: &Point3<f64>,
 ) -> Result<TrackerFrame> {
+    fit_frame(measured, flanges, mounting_guess, None)
+}
+
+/// [`fit_tracker_frame`] with the mounting refitted only along `directions` (orthonormal, flange frame) and
+/// kept at `mounting` across them: where the flange does not turn about a direction over the points, a
+/// mounting offset along it is a shift of the tracker frame and the data cannot tell them apart.
+pub fn fit_tracker_frame_along(
+    measured: &[Point3<f64>],
+    flanges: &[Isometry3<f64>],
+    mounting: &Point3<f64>,
+    directions: &[Vector3<f64>],
+) -> Result<TrackerFrame> {
+    fit_frame(measured, flanges, mounting, Some(directions))
+}
+
+/// The directions (flange frame, orthonormal) about which the flange turns by at least `min_turn` rad RMS over
+/// `flanges`: the mounting components that the points observe. The eigenvectors of
+/// `Σ (R_i − R̄)ᵀ(R_i − R̄) / n`, whose eigenvalue is the mean square of how far `R_i·u` moves, about
+/// the squared angle for small turns.
+pub fn turning_directions(flanges: &[Isometry3<f64>], min_turn: f64) -> Vec<Vector3<f64>> {
+    if flanges.is_empty() {
+        return Vec::new();
+    }
+    let rotations: Vec<Matrix3<f64>> = flanges
+        .iter()
+        .map(|f| f.rotation.to_rotation_matrix().into_inner())
+        .collect();
+    let mean = rotations.iter().sum::<Matrix3<f64>>() / rotations.len() as f64;
+    let spread = rotations
+        .iter()
+        .map(|r| (r - mean).transpose() * (r - mean))
+        .sum::<Matrix3<f64>>()
+        / rotations.len() as f64;
+    let eigen = spread.symmetric_eigen();
+    (0..3)
+        .filter(|&k| eigen.eigenvalues[k] >= min_turn * min_turn)
+        .map(|k| eigen.eigenvectors.column(k).normalize())
+        .collect()
+}
+
+fn fit_frame(
+    measured: &[Point3<f64>],
+    flanges: &[Isometry3<f64>],
+    mounting_guess: &Point3<f64>,
+    directions: Option<&[Vector3<f64>]>,
+) -> Result<TrackerFrame> {
     if measured.len() != flanges.len() {
         return Err(Error::Invalid(format!(
             "tracker frame: {} measured points for {} flange poses",
@@ -156,19 +314,16 @@ pub fn fit_tracker_frame(
         measured,
         flanges,
         base_rotation: first.transform.rotation,
+        mounting: *mounting_guess,
+        directions,
         params: {
             let t = first.transform.translation.vector;
-            DVector::from_vec(vec![
-                0.0,
-                0.0,
-                0.0,
-                t.x,
-                t.y,
-                t.z,
-                mounting_guess.x,
-                mounting_guess.y,
-                mounting_guess.z,
-            ])
+            let mut p = vec![0.0, 0.0, 0.0, t.x, t.y, t.z];
+            match directions {
+                None => p.extend([mounting_guess.x, mounting_guess.y, mounting_guess.z]),
+                Some(d) => p.extend(d.iter().map(|_| 0.0)),
+            }
+            DVector::from_vec(p)
         },
     };
     let (problem, report) = LevenbergMarquardt::new()
@@ -194,11 +349,14 @@ pub fn fit_tracker_frame(
     })
 }
 
-/// Parameters: a rotation vector applied on the left of the closed-form rotation, the translation, the mounting.
+/// Parameters: a rotation vector applied on the left of the closed-form rotation, the translation, the mounting
+/// (or, with `directions`, its offsets from `mounting` along them).
 struct Problem<'a> {
     measured: &'a [Point3<f64>],
     flanges: &'a [Isometry3<f64>],
     base_rotation: UnitQuaternion<f64>,
+    mounting: Point3<f64>,
+    directions: Option<&'a [Vector3<f64>]>,
     params: DVector<f64>,
 }
 
@@ -207,9 +365,16 @@ impl Problem<'_> {
         let p = &self.params;
         let rotation =
             UnitQuaternion::from_scaled_axis(Vector3::new(p[0], p[1], p[2])) * self.base_rotation;
+        let mounting = match self.directions {
+            None => Point3::new(p[6], p[7], p[8]),
+            Some(d) => d
+                .iter()
+                .enumerate()
+                .fold(self.mounting, |m, (k, u)| m + u * p[6 + k]),
+        };
         (
             Isometry3::from_parts(Translation3::new(p[3], p[4], p[5]), rotation),
-            Point3::new(p[6], p[7], p[8]),
+            mounting,
         )
     }
 }
@@ -240,15 +405,23 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     /// current estimate, which is the true one to first order in the (micro-radian) correction.
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         let (t, _) = self.unpack();
-        let mut j = DMatrix::zeros(3 * self.measured.len(), 9);
+        let mut j = DMatrix::zeros(3 * self.measured.len(), self.params.len());
         for (i, (y, f)) in self.measured.iter().zip(self.flanges).enumerate() {
             let v = t.rotation * y.coords;
             j.fixed_view_mut::<3, 3>(3 * i, 0)
                 .copy_from(&(-v.cross_matrix()));
             j.fixed_view_mut::<3, 3>(3 * i, 3)
                 .copy_from(&Matrix3::identity());
-            j.fixed_view_mut::<3, 3>(3 * i, 6)
-                .copy_from(&(-f.rotation.to_rotation_matrix().into_inner()));
+            let r = f.rotation.to_rotation_matrix().into_inner();
+            match self.directions {
+                None => j.fixed_view_mut::<3, 3>(3 * i, 6).copy_from(&(-r)),
+                Some(d) => {
+                    for (k, u) in d.iter().enumerate() {
+                        j.fixed_view_mut::<3, 1>(3 * i, 6 + k)
+                            .copy_from(&(-(r * u)));
+                    }
+                }
+            }
         }
         Some(j)
     }

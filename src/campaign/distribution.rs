@@ -44,7 +44,9 @@ pub struct Sobol;
 pub struct LatinHypercube;
 
 /// The layouts a scenario can name.
-#[derive(serde::Deserialize, serde::Serialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(
+    serde::Deserialize, serde::Serialize, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum DistributionKind {
     Uniform,

@@ -4,6 +4,7 @@
 pub mod budget;
 pub mod oracle;
 pub mod stats;
+pub mod transfer;
 pub mod truth;
 
 pub use crate::calib::registration::centre;

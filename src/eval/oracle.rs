@@ -57,6 +57,7 @@ impl Oracle {
                     evaluations: 0,
                 },
                 nest,
+                probe_rotation: None,
             },
             nest_rotation,
         })
@@ -141,7 +142,7 @@ impl Fitted for Oracle {
     }
 
     fn models_orientation(&self) -> bool {
-        self.registration.nest.is_some()
+        self.registration.measures_orientation()
     }
 
     fn report(&self, _test: &[Observation]) -> serde_json::Value {
@@ -158,6 +159,8 @@ impl Fitted for Oracle {
             dh: self.dh.clone(),
             registration: self.registration.clone(),
             candidates: Vec::new(),
+            extra_inputs: Vec::new(),
+            extra_input_means: Vec::new(),
             position: Vec::new(),
             orientation: Vec::new(),
         })

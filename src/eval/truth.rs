@@ -321,7 +321,7 @@ pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<Errors> {
     let observations = model.registration().observe(test)?;
     let mut e = Errors::default();
     for o in &observations {
-        let pred = model.predict(&o.q);
+        let pred = model.predict_with(&o.q, &o.inputs);
         e.position.push((o.position - pred.position).norm());
         if let Some(measured) = o.orientation {
             e.orientation.push(measured.angle_to(&pred.orientation));
@@ -333,7 +333,7 @@ pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<Errors> {
 /// True (mapped into the method's frame) vs predicted at the commands of `points`.
 pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> Errors {
     let to_method = truth.to_method(model);
-    let with_orientation = model.registration().nest.is_some();
+    let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<(f64, Option<f64>)> = points
         .par_iter()
         .map(|p| {
@@ -365,7 +365,7 @@ pub fn closed_loop_errors(
     points: &[TruePoint],
 ) -> Errors {
     let to_method = truth.to_method(model);
-    let with_orientation = model.registration().nest.is_some();
+    let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<std::result::Result<(f64, Option<f64>), String>> = points
         .par_iter()
         .map_init(

@@ -1,0 +1,773 @@
+//! Reading a foreign tracker export through a column mapping, so a user maps the file instead of editing it.
+//!
+//! A mapping (a TOML file, `calibrate --mapping FILE.toml`) names the columns and says how to read them:
+//!
+//! ```toml
+//! delimiter = ";"          # one character; "\t" for tabs. Default ","
+//! decimal = ","            # "." (default) or ","
+//!
+//! [joints]                 # optional: default the robot's joint names, in radians
+//! unit = "rad"             # rad | deg (revolute joints; prismatic joints use [position].unit)
+//! columns = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+//!            "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]   # in the robot's joint order
+//!
+//! [position]               # the measured point (reflector, probe origin), tracker frame
+//! unit = "mm"              # m | cm | mm | um
+//! columns = ["measurement_x", "measurement_y", "measurement_z"]
+//!
+//! [orientation]            # optional: a 6-DoF probe's orientation, tracker frame
+//! convention = "intrinsic-xyz"   # intrinsic-ABC | extrinsic-ABC (A, B, C each x, y or z) | quaternion-wxyz | quaternion-xyzw
+//! unit = "deg"             # rad | deg (Euler angles only)
+//! columns = ["measurement_rx", "measurement_ry", "measurement_rz"]
+//!
+//! [inputs]                 # optional: regression inputs beyond the joint angles, name = column
+//! temperature = "measurement_temperature"
+//!
+//! # point_id = "id"        # optional columns: a unique point id; a train/val/test label
+//! # split = "split"
+//! ```
+//!
+//! `intrinsic-xyz` with angles (a, b, c) is `R = Rx(a)·Ry(b)·Rz(c)` (rotate about x, then about the new y, then
+//! about the newest z); `extrinsic-xyz` is `R = Rz(c)·Ry(b)·Rx(a)` (about the fixed x, y, z in turn). Every
+//! value is converted to metres and radians; unknown keys are refused, and every fault in the mapping or in
+//! the file is one line naming the row (as a spreadsheet numbers it: the header is row 1) and the column.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::{Dataset, ExtraInputs, Split};
+use crate::error::{Error, Result};
+use crate::robot::Chain;
+use crate::robot::chain::JointKind;
+
+/// A length unit of the file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LengthUnit {
+    #[default]
+    M,
+    Cm,
+    Mm,
+    Um,
+}
+
+impl LengthUnit {
+    /// Metres per unit.
+    pub fn metres(self) -> f64 {
+        match self {
+            LengthUnit::M => 1.0,
+            LengthUnit::Cm => 1e-2,
+            LengthUnit::Mm => 1e-3,
+            LengthUnit::Um => 1e-6,
+        }
+    }
+}
+
+/// An angle unit of the file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AngleUnit {
+    #[default]
+    Rad,
+    Deg,
+}
+
+impl AngleUnit {
+    /// Radians per unit.
+    pub fn radians(self) -> f64 {
+        match self {
+            AngleUnit::Rad => 1.0,
+            AngleUnit::Deg => std::f64::consts::PI / 180.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointColumns {
+    /// Unit of the revolute joints' angles.
+    #[serde(default)]
+    pub unit: AngleUnit,
+    /// One column per joint of the robot, in its order; absent: the joints' own names.
+    #[serde(default)]
+    pub columns: Option<Vec<String>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositionColumns {
+    #[serde(default)]
+    pub unit: LengthUnit,
+    /// x, y, z of the measured point in the tracker frame.
+    pub columns: Vec<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OrientationColumns {
+    /// `intrinsic-ABC`, `extrinsic-ABC` (A, B, C each `x`, `y` or `z`), `quaternion-wxyz` or `quaternion-xyzw`.
+    pub convention: String,
+    /// Unit of Euler angles (ignored for quaternions).
+    #[serde(default)]
+    pub unit: AngleUnit,
+    /// Three Euler angles in the convention's order, or four quaternion components in its order.
+    pub columns: Vec<String>,
+}
+
+/// How to read a foreign measurement export (module notes).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColumnMapping {
+    #[serde(default = "default_delimiter")]
+    pub delimiter: String,
+    #[serde(default = "default_decimal")]
+    pub decimal: String,
+    #[serde(default)]
+    pub joints: JointColumns,
+    pub position: PositionColumns,
+    #[serde(default)]
+    pub orientation: Option<OrientationColumns>,
+    /// Extra regression inputs: name → column (taken in name order).
+    #[serde(default)]
+    pub inputs: BTreeMap<String, String>,
+    #[serde(default)]
+    pub point_id: Option<String>,
+    #[serde(default)]
+    pub split: Option<String>,
+}
+
+fn default_delimiter() -> String {
+    ",".into()
+}
+
+fn default_decimal() -> String {
+    ".".into()
+}
+
+/// A parsed orientation convention.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Convention {
+    /// `R = R_a(θ1)·R_b(θ2)·R_c(θ3)`, axes 0–2.
+    Intrinsic([usize; 3]),
+    /// `R = R_c(θ3)·R_b(θ2)·R_a(θ1)`.
+    Extrinsic([usize; 3]),
+    QuaternionWxyz,
+    QuaternionXyzw,
+}
+
+impl Convention {
+    pub fn parse(text: &str) -> std::result::Result<Convention, String> {
+        let t = text.trim().to_ascii_lowercase();
+        let bad = || {
+            format!(
+                "orientation convention '{text}': use intrinsic-ABC or extrinsic-ABC (A, B, C each x, y or z, \
+                 no axis twice in a row, e.g. intrinsic-xyz, extrinsic-zyx, intrinsic-zyz), quaternion-wxyz or \
+                 quaternion-xyzw"
+            )
+        };
+        match t.as_str() {
+            "quaternion-wxyz" => return Ok(Convention::QuaternionWxyz),
+            "quaternion-xyzw" => return Ok(Convention::QuaternionXyzw),
+            _ => {}
+        }
+        let (kind, axes) = t.split_once('-').ok_or_else(bad)?;
+        let axes: Vec<usize> = axes
+            .chars()
+            .map(|c| match c {
+                'x' => Some(0),
+                'y' => Some(1),
+                'z' => Some(2),
+                _ => None,
+            })
+            .collect::<Option<Vec<_>>>()
+            .ok_or_else(bad)?;
+        let axes: [usize; 3] = axes.try_into().map_err(|_| bad())?;
+        if axes[0] == axes[1] || axes[1] == axes[2] {
+            return Err(bad());
+        }
+        match kind {
+            "intrinsic" => Ok(Convention::Intrinsic(axes)),
+            "extrinsic" => Ok(Convention::Extrinsic(axes)),
+            _ => Err(bad()),
+        }
+    }
+
+    /// Number of columns: 3 angles or 4 quaternion components.
+    pub fn columns(self) -> usize {
+        match self {
+            Convention::Intrinsic(_) | Convention::Extrinsic(_) => 3,
+            _ => 4,
+        }
+    }
+
+    /// The rotation of three angles (rad) or four quaternion components; `None` for a quaternion whose norm
+    /// is more than 1e-2 from 1.
+    pub fn rotation(self, v: &[f64]) -> Option<UnitQuaternion<f64>> {
+        let about = |axis: usize, angle: f64| {
+            UnitQuaternion::from_axis_angle(
+                &nalgebra::Unit::new_unchecked(Vector3::ith(axis, 1.0)),
+                angle,
+            )
+        };
+        let quaternion = |w: f64, x: f64, y: f64, z: f64| {
+            let q = Quaternion::new(w, x, y, z);
+            ((q.norm() - 1.0).abs() <= 1e-2).then(|| UnitQuaternion::from_quaternion(q))
+        };
+        match self {
+            Convention::Intrinsic([a, b, c]) => {
+                Some(about(a, v[0]) * about(b, v[1]) * about(c, v[2]))
+            }
+            Convention::Extrinsic([a, b, c]) => {
+                Some(about(c, v[2]) * about(b, v[1]) * about(a, v[0]))
+            }
+            Convention::QuaternionWxyz => quaternion(v[0], v[1], v[2], v[3]),
+            Convention::QuaternionXyzw => quaternion(v[3], v[0], v[1], v[2]),
+        }
+    }
+}
+
+impl ColumnMapping {
+    /// Reads a mapping file.
+    pub fn load(path: &Path) -> Result<ColumnMapping> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Data {
+            origin: origin.clone(),
+            message: format!("cannot read: {e}"),
+        })?;
+        ColumnMapping::from_toml(&text, &origin)
+    }
+
+    /// Parses and checks mapping TOML; `origin` names it in messages.
+    pub fn from_toml(text: &str, origin: &str) -> Result<ColumnMapping> {
+        let err = |message: String| Error::Data {
+            origin: origin.to_string(),
+            message,
+        };
+        let mapping: ColumnMapping = toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|s| {
+                    format!(
+                        "line {}: ",
+                        text[..s.start.min(text.len())].matches('\n').count() + 1
+                    )
+                })
+                .unwrap_or_default();
+            err(format!("{line}{}", e.message().trim().replace('\n', "; ")))
+        })?;
+        mapping.check().map_err(err)?;
+        Ok(mapping)
+    }
+
+    fn check(&self) -> std::result::Result<(), String> {
+        self.delimiter_byte()?;
+        self.decimal_char()?;
+        if self.position.columns.len() != 3 {
+            return Err(format!(
+                "[position] columns: x, y, z are 3 columns, the mapping names {}",
+                self.position.columns.len()
+            ));
+        }
+        if let Some(o) = &self.orientation {
+            let convention = Convention::parse(&o.convention)?;
+            if o.columns.len() != convention.columns() {
+                return Err(format!(
+                    "[orientation] columns: {} takes {} columns, the mapping names {}",
+                    o.convention,
+                    convention.columns(),
+                    o.columns.len()
+                ));
+            }
+        }
+        if self.delimiter_byte()? == b'.' && self.decimal_char()? == ',' {
+            return Err("delimiter '.' with decimal ','".into());
+        }
+        if self.delimiter_byte()? as char == self.decimal_char()? {
+            return Err(format!(
+                "delimiter and decimal separator are both '{}'",
+                self.delimiter
+            ));
+        }
+        Ok(())
+    }
+
+    fn delimiter_byte(&self) -> std::result::Result<u8, String> {
+        let d = match self.delimiter.as_str() {
+            "\\t" | "tab" => "\t",
+            other => other,
+        };
+        match d.as_bytes() {
+            [b] if b.is_ascii() && *b != b'"' && *b != b'\n' && *b != b'\r' => Ok(*b),
+            _ => Err(format!(
+                "delimiter '{}': one ASCII character such as \",\", \";\" or \"\\t\"",
+                self.delimiter.escape_default()
+            )),
+        }
+    }
+
+    fn decimal_char(&self) -> std::result::Result<char, String> {
+        match self.decimal.as_str() {
+            "." => Ok('.'),
+            "," => Ok(','),
+            other => Err(format!("decimal '{other}': \".\" or \",\"")),
+        }
+    }
+
+    /// Reads a file through this mapping; `chain` gives the joints (their order and kinds).
+    pub fn read(&self, path: &Path, chain: &Chain) -> Result<Dataset> {
+        let origin = path.display().to_string();
+        let file = std::fs::File::open(path).map_err(|e| Error::Data {
+            origin: origin.clone(),
+            message: format!("cannot read: {e}"),
+        })?;
+        self.from_reader(file, &origin, chain)
+    }
+
+    /// Joint configurations only (for `calibrate apply`): the point ids (the mapped `point_id` column or the
+    /// row numbers) and the angles in `joint_names` order; `prismatic` marks prismatic joints (read in the
+    /// `[position]` unit). The position and orientation columns need not exist.
+    pub fn read_joints(
+        &self,
+        path: &Path,
+        joint_names: &[String],
+        prismatic: &[bool],
+    ) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
+        let origin = path.display().to_string();
+        let table = self.table(path, &origin)?;
+        let (cols, scale) = self.joint_columns(&table, joint_names, prismatic)?;
+        let id_col = match &self.point_id {
+            Some(c) => Some(table.find(c, "point_id")?),
+            None => None,
+        };
+        let mut ids = Vec::with_capacity(table.rows.len());
+        let mut q = Vec::with_capacity(table.rows.len());
+        for r in 0..table.rows.len() {
+            ids.push(match id_col {
+                Some(c) => table.cell(r, c).to_string(),
+                None => (r + 2).to_string(),
+            });
+            q.push(
+                cols.iter()
+                    .zip(&scale)
+                    .map(|(&c, s)| Ok(table.number(r, c)? * s))
+                    .collect::<Result<Vec<f64>>>()?,
+            );
+        }
+        Ok((ids, q))
+    }
+
+    fn table(&self, path: &Path, origin: &str) -> Result<Table> {
+        let err = |message: String| Error::Data {
+            origin: origin.to_string(),
+            message,
+        };
+        self.check().map_err(err)?;
+        let file = std::fs::File::open(path).map_err(|e| err(format!("cannot read: {e}")))?;
+        Table::load(
+            file,
+            origin,
+            self.delimiter_byte().map_err(err)?,
+            self.decimal_char().map_err(err)?,
+        )
+    }
+
+    /// The column of every joint and its scale to radians (metres for a prismatic joint).
+    fn joint_columns(
+        &self,
+        table: &Table,
+        joint_names: &[String],
+        prismatic: &[bool],
+    ) -> Result<(Vec<usize>, Vec<f64>)> {
+        let joint_columns: Vec<String> = match &self.joints.columns {
+            Some(c) if c.len() != joint_names.len() => {
+                return Err(table.error(format!(
+                    "the mapping's [joints] columns name {} columns, the robot has {} joints ({})",
+                    c.len(),
+                    joint_names.len(),
+                    joint_names.join(", ")
+                )));
+            }
+            Some(c) => c.clone(),
+            None => joint_names.to_vec(),
+        };
+        let cols = joint_columns
+            .iter()
+            .zip(joint_names)
+            .map(|(c, j)| table.find(c, &format!("[joints] column of joint {j}")))
+            .collect::<Result<Vec<_>>>()?;
+        let scale = (0..joint_names.len())
+            .map(|i| {
+                if prismatic.get(i).copied().unwrap_or(false) {
+                    self.position.unit.metres()
+                } else {
+                    self.joints.unit.radians()
+                }
+            })
+            .collect();
+        Ok((cols, scale))
+    }
+
+    /// Reads export text from `reader` through this mapping; `origin` names it in messages.
+    pub fn from_reader(
+        &self,
+        reader: impl std::io::Read,
+        origin: &str,
+        chain: &Chain,
+    ) -> Result<Dataset> {
+        let err = |message: String| Error::Data {
+            origin: origin.to_string(),
+            message,
+        };
+        self.check().map_err(err)?;
+        let decimal = self.decimal_char().map_err(err)?;
+        let table = Table::load(reader, origin, self.delimiter_byte().map_err(err)?, decimal)?;
+
+        let joint_names = chain.joint_names();
+        let prismatic: Vec<bool> = chain
+            .joints
+            .iter()
+            .map(|j| j.kind == JointKind::Prismatic)
+            .collect();
+        let (joint_cols, joint_scale) = self.joint_columns(&table, &joint_names, &prismatic)?;
+        let axes = ["x", "y", "z"];
+        let position_cols = self
+            .position
+            .columns
+            .iter()
+            .zip(axes)
+            .map(|(c, a)| table.find(c, &format!("[position] {a}")))
+            .collect::<Result<Vec<_>>>()?;
+        let orientation = match &self.orientation {
+            Some(o) => {
+                let convention = Convention::parse(&o.convention).map_err(err)?;
+                let cols = o
+                    .columns
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| {
+                        table.find(
+                            c,
+                            &format!("[orientation] component {} of {}", k + 1, o.convention),
+                        )
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Some((convention, o.unit.radians(), cols))
+            }
+            None => None,
+        };
+        let input_cols = self
+            .inputs
+            .iter()
+            .map(|(name, c)| table.find(c, &format!("[inputs] {name}")))
+            .collect::<Result<Vec<_>>>()?;
+        let id_col = match &self.point_id {
+            Some(c) => Some(table.find(c, "point_id")?),
+            None => None,
+        };
+        let split_col = match &self.split {
+            Some(c) => Some(table.find(c, "split")?),
+            None => None,
+        };
+
+        let n = table.rows.len();
+        let mut q = Vec::with_capacity(n);
+        let mut measured = Vec::with_capacity(n);
+        let mut rotations = orientation.as_ref().map(|_| Vec::with_capacity(n));
+        let mut inputs = Vec::with_capacity(n);
+        let mut split = split_col.map(|_| Vec::with_capacity(n));
+        let mut ids = Vec::with_capacity(n);
+        let mut seen: HashMap<String, usize> = HashMap::new();
+        let length = self.position.unit.metres();
+        for r in 0..n {
+            q.push(
+                joint_cols
+                    .iter()
+                    .zip(&joint_scale)
+                    .map(|(&c, s)| Ok(table.number(r, c)? * s))
+                    .collect::<Result<Vec<f64>>>()?,
+            );
+            let p = position_cols
+                .iter()
+                .map(|&c| Ok(table.number(r, c)? * length))
+                .collect::<Result<Vec<f64>>>()?;
+            measured.push(vec![Point3::new(p[0], p[1], p[2])]);
+            if let (Some(out), Some((convention, scale, cols))) = (&mut rotations, &orientation) {
+                let is_quaternion = cols.len() == 4;
+                let v = cols
+                    .iter()
+                    .map(|&c| Ok(table.number(r, c)? * if is_quaternion { 1.0 } else { *scale }))
+                    .collect::<Result<Vec<f64>>>()?;
+                out.push(convention.rotation(&v).ok_or_else(|| {
+                    table.error(format!(
+                        "row {}, columns {}…{}: the quaternion's norm is {}, not 1",
+                        r + 2,
+                        table.headers[cols[0]],
+                        table.headers[cols[3]],
+                        Quaternion::new(v[0], v[1], v[2], v[3]).norm()
+                    ))
+                })?);
+            }
+            inputs.push(
+                input_cols
+                    .iter()
+                    .map(|&c| table.number(r, c))
+                    .collect::<Result<Vec<f64>>>()?,
+            );
+            if let (Some(out), Some(c)) = (&mut split, split_col) {
+                let cell = table.cell(r, c);
+                out.push(Split::parse(cell).ok_or_else(|| {
+                    table.error(format!(
+                        "{}: '{cell}' is not a split (train, val, validation or test)",
+                        table.at(r, c)
+                    ))
+                })?);
+            }
+            let id = match id_col {
+                Some(c) => {
+                    let id = table.cell(r, c);
+                    if id.is_empty() {
+                        return Err(table.error(format!("{}: empty", table.at(r, c))));
+                    }
+                    if let Some(first) = seen.insert(id.to_string(), r) {
+                        return Err(table.error(format!(
+                            "{}: '{id}' repeats row {}",
+                            table.at(r, c),
+                            first + 2
+                        )));
+                    }
+                    id.to_string()
+                }
+                None => (r + 2).to_string(),
+            };
+            ids.push(id);
+        }
+        Ok(Dataset {
+            origin: origin.to_string(),
+            joint_names,
+            point_ids: ids,
+            q,
+            measured,
+            nominal_reflectors: None,
+            nominal_flange: None,
+            split,
+            regions: None,
+            measured_orientation: rotations,
+            extra_inputs: (!self.inputs.is_empty()).then(|| ExtraInputs {
+                names: self.inputs.keys().cloned().collect(),
+                values: inputs,
+            }),
+        })
+    }
+}
+
+/// A delimited file held in memory, every row of the header's length.
+struct Table {
+    origin: String,
+    headers: Vec<String>,
+    index: HashMap<String, usize>,
+    rows: Vec<csv::StringRecord>,
+    decimal: char,
+}
+
+impl Table {
+    fn load(
+        reader: impl std::io::Read,
+        origin: &str,
+        delimiter: u8,
+        decimal: char,
+    ) -> Result<Table> {
+        let err = |message: String| Error::Data {
+            origin: origin.to_string(),
+            message,
+        };
+        let csv_err = |e: csv::Error| {
+            let row = e.position().map(|p| format!("row {}: ", p.record() + 1));
+            let message = match e.kind() {
+                csv::ErrorKind::Utf8 { .. } => "not valid UTF-8".to_string(),
+                csv::ErrorKind::Io(io) => format!("cannot read: {io}"),
+                _ => e.to_string(),
+            };
+            err(format!("{}{message}", row.unwrap_or_default()))
+        };
+        let mut csv = csv::ReaderBuilder::new()
+            .delimiter(delimiter)
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .from_reader(reader);
+        let headers: Vec<String> = csv
+            .headers()
+            .map_err(csv_err)?
+            .iter()
+            .map(|h| h.trim_start_matches('\u{feff}').trim().to_string())
+            .collect();
+        if headers.iter().all(String::is_empty) {
+            return Err(err("empty file: no header row".into()));
+        }
+        if headers.len() == 1 {
+            let shown: String = headers[0].chars().take(40).collect();
+            return Err(err(format!(
+                "row 1: one column only with delimiter '{}' (the header reads '{shown}…'); is the delimiter right?",
+                (delimiter as char).escape_default()
+            )));
+        }
+        let mut index = HashMap::new();
+        for (i, h) in headers.iter().enumerate() {
+            if h.is_empty() {
+                continue;
+            }
+            if let Some(first) = index.insert(h.clone(), i) {
+                return Err(err(format!(
+                    "row 1: column '{h}' appears twice (columns {} and {})",
+                    first + 1,
+                    i + 1
+                )));
+            }
+        }
+        let mut rows = Vec::new();
+        for record in csv.records() {
+            let record = record.map_err(csv_err)?;
+            if record.iter().all(str::is_empty) {
+                continue;
+            }
+            if record.len() != headers.len() {
+                return Err(err(format!(
+                    "row {}: {} fields, the header has {} (delimiter '{}')",
+                    rows.len() + 2,
+                    record.len(),
+                    headers.len(),
+                    (delimiter as char).escape_default()
+                )));
+            }
+            rows.push(record);
+        }
+        if rows.is_empty() {
+            return Err(err("no data rows after the header".into()));
+        }
+        Ok(Table {
+            origin: origin.to_string(),
+            headers,
+            index,
+            rows,
+            decimal,
+        })
+    }
+
+    fn error(&self, message: String) -> Error {
+        Error::Data {
+            origin: self.origin.clone(),
+            message,
+        }
+    }
+
+    /// The column `name`, which the mapping gives as `role`; an error naming both and what the header has.
+    fn find(&self, name: &str, role: &str) -> Result<usize> {
+        self.index.get(name.trim()).copied().ok_or_else(|| {
+            const SHOWN: usize = 16;
+            let mut names: Vec<&str> = self
+                .headers
+                .iter()
+                .take(SHOWN)
+                .map(String::as_str)
+                .collect();
+            if self.headers.len() > SHOWN {
+                names.push("…");
+            }
+            self.error(format!(
+                "no column '{name}' (the mapping's {role}); the header has {} columns: {}",
+                self.headers.len(),
+                names.join(", ")
+            ))
+        })
+    }
+
+    fn at(&self, r: usize, c: usize) -> String {
+        format!("row {}, column {}", r + 2, self.headers[c])
+    }
+
+    fn cell(&self, r: usize, c: usize) -> &str {
+        &self.rows[r][c]
+    }
+
+    /// A number with the mapping's decimal separator.
+    fn number(&self, r: usize, c: usize) -> Result<f64> {
+        let cell = self.cell(r, c);
+        if cell.is_empty() {
+            return Err(self.error(format!("{}: empty, a number is needed", self.at(r, c))));
+        }
+        let other = if self.decimal == ',' { '.' } else { ',' };
+        let not_a_number = || {
+            self.error(format!(
+                "{}: '{cell}' is not a number (the mapping's decimal separator is '{}')",
+                self.at(r, c),
+                self.decimal
+            ))
+        };
+        if cell.contains(other) {
+            return Err(not_a_number());
+        }
+        let text = if self.decimal == ',' {
+            cell.replace(',', ".")
+        } else {
+            cell.to_string()
+        };
+        let value: f64 = text.parse().map_err(|_| not_a_number())?;
+        if !value.is_finite() {
+            return Err(self.error(format!("{}: '{cell}' is not finite", self.at(r, c))));
+        }
+        Ok(value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conventions() {
+        let v = [0.3, -0.2, 0.5];
+        let (x, y, z) = (Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis());
+        let r = |a: &nalgebra::Unit<Vector3<f64>>, t: f64| UnitQuaternion::from_axis_angle(a, t);
+        let intr = Convention::parse("intrinsic-xyz")
+            .unwrap()
+            .rotation(&v)
+            .unwrap();
+        assert!(intr.angle_to(&(r(&x, v[0]) * r(&y, v[1]) * r(&z, v[2]))) < 1e-15);
+        let extr = Convention::parse("Extrinsic-XYZ")
+            .unwrap()
+            .rotation(&v)
+            .unwrap();
+        // nalgebra's roll-pitch-yaw is extrinsic x-y-z.
+        assert!(extr.angle_to(&UnitQuaternion::from_euler_angles(v[0], v[1], v[2])) < 1e-15);
+        let zyz = Convention::parse("intrinsic-zyz")
+            .unwrap()
+            .rotation(&v)
+            .unwrap();
+        assert!(zyz.angle_to(&(r(&z, v[0]) * r(&y, v[1]) * r(&z, v[2]))) < 1e-15);
+        let q = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
+        let c = q.coords; // i, j, k, w
+        let wxyz = Convention::QuaternionWxyz
+            .rotation(&[c[3], c[0], c[1], c[2]])
+            .unwrap();
+        let xyzw = Convention::QuaternionXyzw
+            .rotation(&[c[0], c[1], c[2], c[3]])
+            .unwrap();
+        assert!(wxyz.angle_to(&q) < 1e-15 && xyzw.angle_to(&q) < 1e-15);
+        assert!(
+            Convention::QuaternionWxyz
+                .rotation(&[2.0, 0.0, 0.0, 0.0])
+                .is_none()
+        );
+        for bad in [
+            "intrinsic-xxz",
+            "xyz",
+            "intrinsic-xy",
+            "sideways-xyz",
+            "quaternion",
+        ] {
+            assert!(Convention::parse(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,410 @@
+//! PNG plots: learning curves with their spread, before/after histograms like the paper's Figs. 2–5.
+//!
+//! Text is drawn with the DejaVu Sans embedded in the binary, so no system font is needed. Every plot is
+//! returned as PNG bytes (`plots/<name>.png`, ready for [`crate::output::write_files`]): nothing lands in the
+//! results directory until the whole report is ready. Plotters draws into an RGB buffer and the `image`
+//! crate (the one plotters itself uses) encodes it, all in memory.
+
+use std::error::Error as StdError;
+use std::sync::OnceLock;
+
+use image::ImageEncoder;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+use crate::error::{Error, Result};
+use crate::report::summary::{Curve, axes, floor_spread, learning_curves};
+use crate::study::StudyResult;
+
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const FAMILY: &str = "sans-serif";
+
+type Drawn = std::result::Result<(), Box<dyn StdError>>;
+
+/// Registers the embedded font once, as plotters' default family.
+fn ensure_font() -> Result<()> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = *DONE.get_or_init(|| register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::Invalid(
+            "the embedded font assets/DejaVuSans.ttf does not load".into(),
+        ))
+    }
+}
+
+/// Renders `draw` on a white `size` canvas and returns the PNG bytes.
+fn render(
+    name: &str,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Drawn,
+) -> Result<Vec<u8>> {
+    ensure_font()?;
+    let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
+    let drawn: Drawn = (|| {
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        draw(&root)?;
+        root.present()?;
+        Ok(())
+    })();
+    drawn.map_err(|e| Error::Invalid(format!("plot {name}: {e}")))?;
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&rgb, size.0, size.1, image::ColorType::Rgb8)
+        .map_err(|e| Error::Invalid(format!("plot {name}: PNG encoding: {e}")))?;
+    Ok(png)
+}
+
+/// A name safe as a file name: letters, digits, `-`, `_` and `.` kept, anything else `_`.
+fn file_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Tableau's ten colours, one per method.
+fn colour(i: usize) -> RGBColor {
+    const TAB10: [(u8, u8, u8); 10] = [
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (214, 39, 40),
+        (148, 103, 189),
+        (140, 86, 75),
+        (227, 119, 194),
+        (127, 127, 127),
+        (188, 189, 34),
+        (23, 190, 207),
+    ];
+    let (r, g, b) = TAB10[i % TAB10.len()];
+    RGBColor(r, g, b)
+}
+
+/// One PNG per region, `plots/learning_curves_<region>.png`: the median ground-truth mean (mm) against the
+/// training-set size on log axes, a line per method with its interquartile band, one panel per layout, the
+/// floor dashed.
+pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
+    let a = axes(study);
+    let curves = learning_curves(study);
+    let mut out = Vec::new();
+    for region in &a.regions {
+        let layouts: Vec<_> = a
+            .distributions
+            .iter()
+            .copied()
+            .filter(|d| {
+                curves
+                    .iter()
+                    .any(|c| &c.region == region && c.distribution == *d)
+            })
+            .collect();
+        if layouts.is_empty() {
+            continue;
+        }
+        let cols = layouts.len().min(2);
+        let rows = layouts.len().div_ceil(cols);
+        let (pw, ph) = (960u32, 680u32);
+        let name = format!("plots/learning_curves_{}.png", file_safe(region));
+        let png = render(&name, (pw * cols as u32, ph * rows as u32), |root| {
+            let panels = root.split_evenly((rows, cols));
+            for (panel, &d) in panels.iter().zip(&layouts) {
+                let these: Vec<(usize, &Curve)> = a
+                    .methods
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, m)| {
+                        curves
+                            .iter()
+                            .find(|c| &c.region == region && c.distribution == d && &c.method == m)
+                            .map(|c| (i, c))
+                    })
+                    .collect();
+                let floor: Vec<(f64, f64)> = a
+                    .sizes
+                    .iter()
+                    .filter_map(|&n| {
+                        floor_spread(study, region, d, n).map(|s| (n as f64, s.median))
+                    })
+                    .filter(|p| p.1 > 0.0)
+                    .collect();
+                learning_panel(
+                    panel,
+                    &format!("region {region}, {} layout", d.name()),
+                    &these,
+                    &floor,
+                )?;
+            }
+            Ok(())
+        })?;
+        out.push((name, png));
+    }
+    Ok(out)
+}
+
+fn learning_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    title: &str,
+    curves: &[(usize, &Curve)],
+    floor: &[(f64, f64)],
+) -> Drawn {
+    let mut xs: Vec<f64> = Vec::new();
+    let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
+    for (_, c) in curves {
+        for p in &c.points {
+            if let Some(s) = p.truth {
+                xs.push(p.n_train as f64);
+                ys.extend([s.q1, s.median, s.q3]);
+            }
+        }
+    }
+    xs.extend(floor.iter().map(|p| p.0));
+    ys.retain(|y| y.is_finite() && *y > 0.0);
+    xs.retain(|x| *x > 0.0);
+    if xs.is_empty() || ys.is_empty() {
+        panel.titled(&format!("{title}: no successful run"), (FAMILY, 26))?;
+        return Ok(());
+    }
+    let (x0, x1) = min_max(&xs);
+    let (y0, y1) = min_max(&ys);
+    let (ylo, yhi) = (y0 / 1.3, y1 * 2.5);
+    // Ticks: the training-set sizes on x; 1, 2, 5 × 10^k on y (every digit as a light line).
+    let mut sizes: Vec<f64> = xs.clone();
+    sizes.sort_by(f64::total_cmp);
+    sizes.dedup();
+    let decades = (ylo.log10().floor() as i32)..=(yhi.log10().ceil() as i32);
+    let ticks = |digits: &[f64]| -> Vec<f64> {
+        decades
+            .clone()
+            .flat_map(|k| digits.iter().map(move |d| d * 10f64.powi(k)))
+            .filter(|y| (ylo..=yhi).contains(y))
+            .collect()
+    };
+    let bold = ticks(&[1.0, 2.0, 5.0]);
+    let light = ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    let mut chart = ChartBuilder::on(panel)
+        .caption(title, (FAMILY, 26))
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(86)
+        .build_cartesian_2d(
+            (x0 / 1.25..x1 * 1.25).log_scale().with_key_points(sizes),
+            (ylo..yhi)
+                .log_scale()
+                .with_key_points(bold)
+                .with_light_points(light),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("training points (log scale)")
+        .y_desc("ground-truth mean error (mm, log scale)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| {
+            let decimals = (-y.log10().floor()).max(0.0) as usize;
+            format!("{y:.decimals$}")
+        })
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    for &(i, c) in curves {
+        let band: Vec<(f64, f64, f64, f64)> = c
+            .points
+            .iter()
+            .filter_map(|p| p.truth.map(|s| (p.n_train as f64, s.q1, s.median, s.q3)))
+            .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0)
+            .collect();
+        if band.is_empty() {
+            continue;
+        }
+        let col = colour(i);
+        if band.len() > 1 {
+            let polygon: Vec<(f64, f64)> = band
+                .iter()
+                .map(|p| (p.0, p.3))
+                .chain(band.iter().rev().map(|p| (p.0, p.1)))
+                .collect();
+            chart.draw_series(std::iter::once(Polygon::new(
+                polygon,
+                col.mix(0.15).filled(),
+            )))?;
+        } else {
+            let p = band[0];
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(p.0, p.1), (p.0, p.3)],
+                col.stroke_width(2),
+            )))?;
+        }
+        chart
+            .draw_series(LineSeries::new(
+                band.iter().map(|p| (p.0, p.2)),
+                col.stroke_width(3),
+            ))?
+            .label(c.method.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(3)));
+        chart.draw_series(
+            band.iter()
+                .map(|p| Circle::new((p.0, p.2), 4, col.filled())),
+        )?;
+    }
+    if !floor.is_empty() {
+        let line: Vec<(f64, f64)> = if floor.len() == 1 {
+            vec![(x0 / 1.25, floor[0].1), (x1 * 1.25, floor[0].1)]
+        } else {
+            floor.to_vec()
+        };
+        chart
+            .draw_series(DashedLineSeries::new(line, 8, 6, BLACK.stroke_width(2)))?
+            .label("floor (oracle), dashed")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FAMILY, 17))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()?;
+    Ok(())
+}
+
+fn min_max(v: &[f64]) -> (f64, f64) {
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
+}
+
+/// Number of histogram bins.
+const BINS: usize = 40;
+
+/// One PNG per method of the detail run, `plots/histogram_<method>.png`: its test-split position errors (mm)
+/// before calibration (nominal) and after, overlaid on the same bins, like the paper's Figs. 2–5.
+pub fn histograms_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
+    let d = &study.detail;
+    let mut out = Vec::new();
+    for (method, h) in &d.histograms {
+        let before: Vec<f64> = h
+            .before
+            .iter()
+            .filter(|v| v.is_finite())
+            .map(|v| v * 1e3)
+            .collect();
+        let after: Vec<f64> = h
+            .after
+            .iter()
+            .filter(|v| v.is_finite())
+            .map(|v| v * 1e3)
+            .collect();
+        if before.is_empty() && after.is_empty() {
+            continue;
+        }
+        let name = format!("plots/histogram_{}.png", file_safe(method));
+        let title = format!(
+            "{method}: test-split position error, region {}, {} layout, {} training points",
+            d.region,
+            d.distribution.name(),
+            d.n_train
+        );
+        let png = render(&name, (1200, 720), |root| {
+            histogram_panel(root, &title, &before, &after)
+        })?;
+        out.push((name, png));
+    }
+    Ok(out)
+}
+
+fn counts(values: &[f64], width: f64) -> Vec<usize> {
+    let mut c = vec![0; BINS];
+    for &v in values {
+        let i = ((v.max(0.0) / width) as usize).min(BINS - 1);
+        c[i] += 1;
+    }
+    c
+}
+
+fn histogram_panel(
+    root: &DrawingArea<BitMapBackend, Shift>,
+    title: &str,
+    before: &[f64],
+    after: &[f64],
+) -> Drawn {
+    let top = before.iter().chain(after).fold(0.0f64, |m, &v| m.max(v));
+    let x1 = if top > 0.0 { top * 1.02 } else { 1e-3 };
+    let width = x1 / BINS as f64;
+    let (cb, ca) = (counts(before, width), counts(after, width));
+    let ymax = cb.iter().chain(&ca).copied().max().unwrap_or(0).max(1);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 24))
+        .margin(18)
+        .x_label_area_size(56)
+        .y_label_area_size(76)
+        .build_cartesian_2d(0.0..x1, 0.0..ymax as f64 * 1.12)?;
+    chart
+        .configure_mesh()
+        .x_desc("position error (mm)")
+        .y_desc("points")
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let series = [
+        (
+            format!(
+                "before (nominal): n = {}, mean {:.4} mm, max {:.4} mm",
+                before.len(),
+                mean(before),
+                before.iter().fold(0.0f64, |m, &v| m.max(v))
+            ),
+            &cb,
+            RGBColor(214, 39, 40),
+        ),
+        (
+            format!(
+                "after: n = {}, mean {:.4} mm, max {:.4} mm",
+                after.len(),
+                mean(after),
+                after.iter().fold(0.0f64, |m, &v| m.max(v))
+            ),
+            &ca,
+            RGBColor(31, 119, 180),
+        ),
+    ];
+    for (label, c, col) in series {
+        chart
+            .draw_series(
+                c.iter()
+                    .enumerate()
+                    .filter(|(_, k)| **k > 0)
+                    .map(|(i, &k)| {
+                        Rectangle::new(
+                            [(i as f64 * width, 0.0), ((i + 1) as f64 * width, k as f64)],
+                            col.mix(0.45).filled(),
+                        )
+                    }),
+            )?
+            .label(label)
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 7), (x + 20, y + 7)], col.mix(0.45).filled())
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FAMILY, 18))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()?;
+    Ok(())
+}

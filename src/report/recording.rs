@@ -1,0 +1,620 @@
+//! The rerun recording of a study, `campaign.rrd`: open it with the viewer of the same version
+//! (`pip install "rerun-sdk==0.36.*"`, then `rerun results/<scenario>/campaign.rrd`).
+//!
+//! Everything is in metres, in the world frame, Z up ([`ViewCoordinates::RIGHT_HAND_Z_UP`] logged statically at
+//! the root). The wall-clock `log_time` timeline is off and the recording id is fixed (`calibench-<scenario>`),
+//! so two runs of the same scenario give recordings that `rerun rrd compare --unordered` finds equal.
+//!
+//! # Timelines
+//!
+//! * `point` (sequence): the index of the detail campaign's point; the robot is drawn at that point.
+//! * `n_train` (sequence): the training-set size of the learning curves.
+//!
+//! Everything else is static.
+//!
+//! # Entity paths
+//!
+//! Names taken from the scenario (regions, methods) keep `[A-Za-z0-9_.-]`; any other character becomes `_`.
+//! Distributions use their scenario spelling (`uniform`, `latin-hypercube`, …).
+//!
+//! | path | archetypes | timeline, rows |
+//! |---|---|---|
+//! | `/` | `ViewCoordinates` (right-handed, Z up) | static |
+//! | `world/robot/link_<i>` | `Transform3D` (world ← body `i`, nominal FK at `q_cmd`; body 0 is the base) | `point`, one row per detail point |
+//! | `world/robot/link_<i>/cylinders` | `Cylinders3D`, the body's cylinder colliders in its frame | static |
+//! | `world/robot/link_<i>/capsules` | `Capsules3D` | static |
+//! | `world/robot/link_<i>/spheres` | `Ellipsoids3D` | static |
+//! | `world/robot/link_<i>/boxes` | `Boxes3D` | static |
+//! | `world/robot/skeleton` | `LineStrips3D` through the joint anchors to the flange | `point` |
+//! | `world/robot/flange` | `Transform3D` (world ← true flange) + `TransformAxes3D` | `point` (transform), static (axes) |
+//! | `world/regions/<region>` | `Boxes3D` (wireframe, labelled) | static |
+//! | `world/tracker` | `Transform3D` (world ← tracker) + `TransformAxes3D` + `Ellipsoids3D` (the head) | static |
+//! | `world/tracker/beams` | `LineStrips3D`, one beam per detail point, in the tracker frame | static |
+//! | `world/tracker/beam` | `LineStrips3D`, the beam to the current point | `point` |
+//! | `world/points/before` | `Points3D` at the true positions, coloured by \|error before\| | static |
+//! | `world/arrows/before_x<f>` | `Arrows3D`, error before calibration × `f` | static |
+//! | `world/arrows/after_x<f>_<method>` | `Arrows3D`, error after the detail method × `f` | static |
+//! | `world/grid/<method>` | `Points3D`, the ground-truth grid coloured by the detail method's residual | static |
+//! | `histograms/<method>/before`, `histograms/<method>/after` | `BarChart` (counts; abscissa = bin centres, mm) | static |
+//! | `curves/<region>/<distribution>/<method>` | `SeriesLines` (named `<method> <distribution>`, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train`, one row per size with an OK seed |
+//! | `legend` | `TextDocument` (markdown): the colour scales and the arrow factor | static |
+//! | `summary` | `TextDocument` (markdown): the study summary | static |
+//!
+//! # Colours
+//!
+//! Errors map linearly onto the viridis colormap (dark purple = 0 → yellow = top of scale), in millimetres.
+//! The measured points and both arrow sets share one scale, the largest error before calibration rounded up in
+//! the 1-2-5 sequence (so the after arrows look dark next to the before ones); the residual grid has its own scale,
+//! its largest residual rounded up the same way. The `legend` document states both scales.
+//!
+//! # Arrow magnification
+//!
+//! The arrow factor `f` is the largest 1-2-5 number (at least 1) that keeps the longest error-before arrow under
+//! 0.1 m; both arrow sets use it, and it is part of their entity paths ([`arrow_factor`]).
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rerun::{
+    Arrows3D, BarChart, Boxes3D, Capsules3D, Cylinders3D, Ellipsoids3D, FillMode, LineStrips3D,
+    Points3D, Quaternion, RecordingStream, RecordingStreamBuilder, Scalars, SeriesLines,
+    TextDocument, Transform3D, TransformAxes3D, ViewCoordinates,
+};
+
+use crate::error::{Error, Result};
+use crate::robot::kinematics::{Frames, forward_kinematics};
+use crate::robot::{Chain, Shape};
+use crate::study::{DetailPoint, StudyResult};
+
+/// The application id of every recording.
+pub const APPLICATION_ID: &str = "calibench";
+/// The sequence timeline of the detail campaign's points.
+pub const POINT_TIMELINE: &str = "point";
+/// The sequence timeline of the learning curves.
+pub const N_TRAIN_TIMELINE: &str = "n_train";
+/// Bins of every histogram.
+pub const HISTOGRAM_BINS: usize = 20;
+
+/// The longest error-before arrow stays under this length (m).
+const ARROW_TARGET_M: f64 = 0.1;
+
+/// The `.rrd` bytes of the study's recording (see the module documentation for what it holds).
+///
+/// The recording goes to an in-memory sink (`RecordingStreamBuilder::memory`) and is encoded at the end, so the
+/// caller writes the file atomically and a failed study leaves no partial recording behind.
+pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Result<Vec<u8>> {
+    let (rec, storage) = RecordingStreamBuilder::new(APPLICATION_ID)
+        .recording_id(format!("calibench-{}", sanitize(&study.scenario.name)))
+        // Forced on: the recording is an output of the harness, whatever the `RERUN` environment says.
+        .enabled(true)
+        .memory()
+        .map_err(rerun_error)?;
+    rec.set_log_time_enabled(false);
+    rec.set_log_tick_enabled(false);
+
+    log_all(&rec, study, chain, summary_markdown)?;
+
+    let bytes = storage.drain_as_bytes().map_err(rerun_error)?;
+    Ok(bytes)
+}
+
+/// The magnification of the error arrows: the largest 1-2-5 number (at least 1) with
+/// `max |error_before| × factor ≤ 0.1 m`.
+pub fn arrow_factor(points: &[DetailPoint]) -> u64 {
+    let max = points
+        .iter()
+        .map(|p| p.error_before.norm())
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    if max <= 0.0 {
+        return 1;
+    }
+    let wanted = ARROW_TARGET_M / max;
+    if wanted < 1.0 {
+        return 1;
+    }
+    let decade = 10f64.powi(wanted.log10().floor() as i32);
+    let mantissa = [5.0, 2.0, 1.0]
+        .into_iter()
+        .find(|m| m * decade <= wanted * (1.0 + 1e-12))
+        .unwrap_or(1.0);
+    (mantissa * decade).round().clamp(1.0, 1e9) as u64
+}
+
+/// A scenario name as one entity-path part: `[A-Za-z0-9_.-]` kept, anything else `_`.
+pub fn sanitize(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() { "_".into() } else { s }
+}
+
+/// The viridis colour of `value` on a `0..=scale` axis (same unit), clamped.
+pub fn viridis(value: f64, scale: f64) -> [u8; 4] {
+    const STOPS: [[f64; 3]; 9] = [
+        [68.0, 1.0, 84.0],
+        [71.0, 44.0, 122.0],
+        [59.0, 81.0, 139.0],
+        [44.0, 113.0, 142.0],
+        [33.0, 144.0, 141.0],
+        [39.0, 173.0, 129.0],
+        [92.0, 200.0, 99.0],
+        [170.0, 220.0, 50.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let t = if scale > 0.0 && value.is_finite() {
+        (value / scale).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (STOPS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(STOPS.len() - 2);
+    let f = x - i as f64;
+    let c = |k: usize| (STOPS[i][k] + f * (STOPS[i + 1][k] - STOPS[i][k])).round() as u8;
+    [c(0), c(1), c(2), 255]
+}
+
+/// The smallest 1-2-5 number ≥ `value` (and ≥ 0.001), for colour scales in mm.
+fn nice_ceiling(value: f64) -> f64 {
+    let v = if value.is_finite() {
+        value.max(1e-3)
+    } else {
+        1e-3
+    };
+    let decade = 10f64.powi(v.log10().floor() as i32);
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * decade)
+        .find(|c| *c >= v * (1.0 - 1e-12))
+        .unwrap_or(10.0 * decade)
+}
+
+fn rerun_error(e: impl std::fmt::Display) -> Error {
+    Error::io(
+        "campaign.rrd",
+        std::io::Error::other(format!("rerun recording: {e}")),
+    )
+}
+
+fn f3(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn p3(p: &Point3<f64>) -> [f32; 3] {
+    [p.x as f32, p.y as f32, p.z as f32]
+}
+
+fn quat(iso: &Isometry3<f64>) -> Quaternion {
+    let q = iso.rotation.into_inner().coords;
+    Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32])
+}
+
+fn transform(iso: &Isometry3<f64>) -> Transform3D {
+    Transform3D::from_translation_rotation(f3(&iso.translation.vector), quat(iso))
+}
+
+fn mm(m: f64) -> f64 {
+    m * 1e3
+}
+
+/// A distinct colour per series index.
+fn palette(i: usize) -> [u8; 4] {
+    const COLORS: [[u8; 4]; 8] = [
+        [31, 119, 180, 255],
+        [255, 127, 14, 255],
+        [44, 160, 44, 255],
+        [214, 39, 40, 255],
+        [148, 103, 189, 255],
+        [140, 86, 75, 255],
+        [227, 119, 194, 255],
+        [127, 127, 127, 255],
+    ];
+    COLORS[i % COLORS.len()]
+}
+
+fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &str) -> Result<()> {
+    rec.log_static("/", &ViewCoordinates::RIGHT_HAND_Z_UP())
+        .map_err(rerun_error)?;
+
+    let detail = &study.detail;
+    let before_scale_mm = nice_ceiling(
+        detail
+            .points
+            .iter()
+            .map(|p| mm(p.error_before.norm()))
+            .fold(0.0, f64::max),
+    );
+    let grid_scale_mm = nice_ceiling(
+        detail
+            .grid
+            .iter()
+            .map(|g| mm(g.residual))
+            .fold(0.0, f64::max),
+    );
+    let factor = arrow_factor(&detail.points);
+
+    log_robot(rec, study, chain)?;
+    log_regions(rec, study, chain)?;
+    log_tracker(rec, study)?;
+    log_points(rec, study, before_scale_mm, grid_scale_mm, factor)?;
+    log_histograms(rec, study)?;
+    log_curves(rec, study)?;
+
+    let legend = format!(
+        "# Legend\n\n\
+         * Colormap: viridis, linear, dark purple = 0 mm, yellow = top of scale.\n\
+         * Measured points (`world/points/before`) and error arrows (`world/arrows/…`): 0 – {before_scale_mm} mm \
+         (|error before calibration|, resp. |error after|).\n\
+         * Ground-truth grid (`world/grid/{method}`): 0 – {grid_scale_mm} mm (residual of `{method}`).\n\
+         * Arrows magnified ×{factor}.\n\
+         * Robot drawn with the nominal model at each point's commanded joints (timeline `point`).\n",
+        method = sanitize(&detail.method),
+    );
+    rec.log_static("legend", &TextDocument::from_markdown(legend))
+        .map_err(rerun_error)?;
+    rec.log_static("summary", &TextDocument::from_markdown(summary))
+        .map_err(rerun_error)?;
+    Ok(())
+}
+
+fn log_robot(rec: &RecordingStream, study: &StudyResult, chain: &Chain) -> Result<()> {
+    let link_color = [255, 140, 0, 160];
+    for (i, body) in chain.bodies.iter().enumerate() {
+        let path = format!("world/robot/link_{i}");
+        let mut cylinders = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut capsules = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut spheres = (Vec::new(), Vec::new());
+        let mut boxes = (Vec::new(), Vec::new(), Vec::new());
+        for collider in &body.colliders {
+            let o = &collider.origin;
+            match collider.shape {
+                Shape::Cylinder { radius, length } => {
+                    cylinders.0.push(length as f32);
+                    cylinders.1.push(radius as f32);
+                    cylinders.2.push(f3(&o.translation.vector));
+                    cylinders.3.push(quat(o));
+                }
+                Shape::Capsule { radius, length } => {
+                    // Rerun's capsule starts at its frame's origin and runs along +z; ours is centred.
+                    let start = o * Point3::new(0.0, 0.0, -length / 2.0);
+                    capsules.0.push(length as f32);
+                    capsules.1.push(radius as f32);
+                    capsules.2.push(p3(&start));
+                    capsules.3.push(quat(o));
+                }
+                Shape::Sphere { radius } => {
+                    spheres.0.push(f3(&o.translation.vector));
+                    spheres.1.push(radius as f32);
+                }
+                Shape::Cuboid { half_extents } => {
+                    boxes.0.push(f3(&o.translation.vector));
+                    boxes.1.push(half_extents.map(|h| h as f32));
+                    boxes.2.push(quat(o));
+                }
+            }
+        }
+        if !cylinders.0.is_empty() {
+            let n = cylinders.0.len();
+            rec.log_static(
+                format!("{path}/cylinders"),
+                &Cylinders3D::from_lengths_and_radii(cylinders.0, cylinders.1)
+                    .with_centers(cylinders.2)
+                    .with_quaternions(cylinders.3)
+                    .with_colors(vec![link_color; n])
+                    .with_fill_mode(FillMode::Solid),
+            )
+            .map_err(rerun_error)?;
+        }
+        if !capsules.0.is_empty() {
+            let n = capsules.0.len();
+            rec.log_static(
+                format!("{path}/capsules"),
+                &Capsules3D::from_lengths_and_radii(capsules.0, capsules.1)
+                    .with_translations(capsules.2)
+                    .with_quaternions(capsules.3)
+                    .with_colors(vec![link_color; n])
+                    .with_fill_mode(FillMode::Solid),
+            )
+            .map_err(rerun_error)?;
+        }
+        if !spheres.0.is_empty() {
+            let n = spheres.0.len();
+            rec.log_static(
+                format!("{path}/spheres"),
+                &Ellipsoids3D::from_centers_and_radii(spheres.0, spheres.1)
+                    .with_colors(vec![link_color; n])
+                    .with_fill_mode(FillMode::Solid),
+            )
+            .map_err(rerun_error)?;
+        }
+        if !boxes.0.is_empty() {
+            let n = boxes.0.len();
+            rec.log_static(
+                format!("{path}/boxes"),
+                &Boxes3D::from_centers_and_half_sizes(boxes.0, boxes.1)
+                    .with_quaternions(boxes.2)
+                    .with_colors(vec![link_color; n])
+                    .with_fill_mode(FillMode::Solid),
+            )
+            .map_err(rerun_error)?;
+        }
+    }
+    rec.log_static("world/robot/flange", &TransformAxes3D::new(0.1f32))
+        .map_err(rerun_error)?;
+
+    let mut frames = Frames::new(chain);
+    let tracker = &study.detail.tracker;
+    for (k, point) in study.detail.points.iter().enumerate() {
+        if point.q_cmd.len() != chain.dof() {
+            return Err(Error::Invalid(format!(
+                "recording: detail point {k} has {} joints, the robot {}",
+                point.q_cmd.len(),
+                chain.dof()
+            )));
+        }
+        forward_kinematics(chain, &point.q_cmd, &mut frames);
+        rec.set_time_sequence(POINT_TIMELINE, k as i64);
+        for (i, body) in frames.body.iter().enumerate() {
+            rec.log(format!("world/robot/link_{i}"), &transform(body))
+                .map_err(rerun_error)?;
+        }
+        let mut skeleton = vec![p3(&Point3::from(chain.base.translation.vector))];
+        skeleton.extend((0..chain.dof()).map(|i| p3(&frames.anchor(i))));
+        skeleton.push(f3(&frames.flange.translation.vector));
+        rec.log(
+            "world/robot/skeleton",
+            &LineStrips3D::new([skeleton])
+                .with_radii([0.004f32])
+                .with_colors([[90, 90, 90, 255]]),
+        )
+        .map_err(rerun_error)?;
+        rec.log("world/robot/flange", &transform(&point.true_flange))
+            .map_err(rerun_error)?;
+        let target = tracker.inverse_transform_point(&point.true_position);
+        rec.log(
+            "world/tracker/beam",
+            &LineStrips3D::new([[[0.0f32; 3], p3(&target)]])
+                .with_radii([0.0015f32])
+                .with_colors([[255, 40, 40, 255]]),
+        )
+        .map_err(rerun_error)?;
+    }
+    rec.reset_time();
+    Ok(())
+}
+
+fn log_regions(rec: &RecordingStream, study: &StudyResult, chain: &Chain) -> Result<()> {
+    for (i, region) in study.regions.iter().enumerate() {
+        // Regions are boxes in the robot's base frame.
+        let pose = chain.base * nalgebra::Translation3::from(Vector3::from(region.center_m));
+        rec.log_static(
+            format!("world/regions/{}", sanitize(&region.name)),
+            &Boxes3D::from_centers_and_half_sizes(
+                [f3(&pose.translation.vector)],
+                [region.size_m.map(|s| (s / 2.0) as f32)],
+            )
+            .with_quaternions([quat(&pose)])
+            .with_colors([palette(i)])
+            .with_radii([0.002f32])
+            .with_fill_mode(FillMode::MajorWireframe)
+            .with_labels([region.name.clone()]),
+        )
+        .map_err(rerun_error)?;
+    }
+    Ok(())
+}
+
+fn log_tracker(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
+    let tracker = &study.detail.tracker;
+    rec.log_static("world/tracker", &transform(tracker))
+        .map_err(rerun_error)?;
+    rec.log_static("world/tracker", &TransformAxes3D::new(0.2f32))
+        .map_err(rerun_error)?;
+    rec.log_static(
+        "world/tracker",
+        &Ellipsoids3D::from_centers_and_radii([[0.0f32; 3]], [0.08])
+            .with_colors([[40, 40, 40, 255]])
+            .with_fill_mode(FillMode::Solid)
+            .with_labels(["tracker"]),
+    )
+    .map_err(rerun_error)?;
+    let beams: Vec<[[f32; 3]; 2]> = study
+        .detail
+        .points
+        .iter()
+        .map(|p| {
+            [
+                [0.0; 3],
+                p3(&tracker.inverse_transform_point(&p.true_position)),
+            ]
+        })
+        .collect();
+    rec.log_static(
+        "world/tracker/beams",
+        &LineStrips3D::new(beams)
+            .with_radii([0.0005f32])
+            .with_colors([[255, 80, 80, 90]]),
+    )
+    .map_err(rerun_error)?;
+    Ok(())
+}
+
+fn log_points(
+    rec: &RecordingStream,
+    study: &StudyResult,
+    before_scale_mm: f64,
+    grid_scale_mm: f64,
+    factor: u64,
+) -> Result<()> {
+    let detail = &study.detail;
+    let positions: Vec<[f32; 3]> = detail.points.iter().map(|p| p3(&p.true_position)).collect();
+    let colors_before: Vec<[u8; 4]> = detail
+        .points
+        .iter()
+        .map(|p| viridis(mm(p.error_before.norm()), before_scale_mm))
+        .collect();
+    rec.log_static(
+        "world/points/before",
+        &Points3D::new(positions.clone())
+            .with_colors(colors_before.clone())
+            .with_radii([0.005f32]),
+    )
+    .map_err(rerun_error)?;
+
+    let f = factor as f64;
+    rec.log_static(
+        format!("world/arrows/before_x{factor}"),
+        &Arrows3D::from_vectors(detail.points.iter().map(|p| f3(&(p.error_before * f))))
+            .with_origins(positions.clone())
+            .with_colors(colors_before)
+            .with_radii([0.002f32]),
+    )
+    .map_err(rerun_error)?;
+    rec.log_static(
+        format!("world/arrows/after_x{factor}_{}", sanitize(&detail.method)),
+        &Arrows3D::from_vectors(detail.points.iter().map(|p| f3(&(p.error_after * f))))
+            .with_origins(positions)
+            .with_colors(
+                detail
+                    .points
+                    .iter()
+                    .map(|p| viridis(mm(p.error_after.norm()), before_scale_mm))
+                    .collect::<Vec<_>>(),
+            )
+            .with_radii([0.002f32]),
+    )
+    .map_err(rerun_error)?;
+
+    rec.log_static(
+        format!("world/grid/{}", sanitize(&detail.method)),
+        &Points3D::new(detail.grid.iter().map(|g| p3(&g.true_position)))
+            .with_colors(
+                detail
+                    .grid
+                    .iter()
+                    .map(|g| viridis(mm(g.residual), grid_scale_mm))
+                    .collect::<Vec<_>>(),
+            )
+            .with_radii([0.003f32]),
+    )
+    .map_err(rerun_error)?;
+    Ok(())
+}
+
+fn log_histograms(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
+    let histograms = &study.detail.histograms;
+    // One set of bins (mm) for every method and both sides, so the bars compare.
+    let top = histograms
+        .values()
+        .flat_map(|h| h.before.iter().chain(&h.after))
+        .filter(|v| v.is_finite())
+        .fold(0.0, |a: f64, &b| a.max(mm(b)));
+    let top = if top > 0.0 { top } else { 1e-3 };
+    let width = top / HISTOGRAM_BINS as f64;
+    let centres: Vec<f64> = (0..HISTOGRAM_BINS)
+        .map(|b| (b as f64 + 0.5) * width)
+        .collect();
+    for (method, ba) in histograms {
+        for (side, values, color) in [
+            ("before", &ba.before, [200, 80, 60, 255]),
+            ("after", &ba.after, [60, 120, 200, 255]),
+        ] {
+            let mut counts = vec![0u32; HISTOGRAM_BINS];
+            for v in values.iter().filter(|v| v.is_finite()) {
+                let b = ((mm(*v) / width) as usize).min(HISTOGRAM_BINS - 1);
+                counts[b] += 1;
+            }
+            rec.log_static(
+                format!("histograms/{}/{side}", sanitize(method)),
+                &BarChart::new(counts)
+                    .with_abscissa(centres.clone())
+                    .with_widths(vec![width as f32; HISTOGRAM_BINS])
+                    .with_color(color),
+            )
+            .map_err(rerun_error)?;
+        }
+    }
+    Ok(())
+}
+
+/// The learning curves: per (region, distribution, method), the median over OK seeds of the ground-truth mean
+/// error at each training-set size (mm).
+pub fn learning_curves(
+    study: &StudyResult,
+) -> BTreeMap<(String, String, String), Vec<(usize, f64)>> {
+    let mut groups: BTreeMap<(String, String, String), BTreeMap<usize, Vec<f64>>> = BTreeMap::new();
+    for run in &study.runs {
+        let Some(truth) = run.truth.as_ref().filter(|_| run.failure.is_none()) else {
+            continue;
+        };
+        if !truth.mean.is_finite() {
+            continue;
+        }
+        let key = (
+            sanitize(&run.key.region),
+            run.key.distribution.name().to_string(),
+            sanitize(&run.key.method),
+        );
+        groups
+            .entry(key)
+            .or_default()
+            .entry(run.key.n_train)
+            .or_default()
+            .push(mm(truth.mean));
+    }
+    groups
+        .into_iter()
+        .map(|(key, sizes)| {
+            let curve = sizes
+                .into_iter()
+                .map(|(n, mut v)| {
+                    v.sort_by(f64::total_cmp);
+                    let m = v.len() / 2;
+                    let median = if v.len() % 2 == 1 {
+                        v[m]
+                    } else {
+                        (v[m - 1] + v[m]) / 2.0
+                    };
+                    (n, median)
+                })
+                .collect();
+            (key, curve)
+        })
+        .collect()
+}
+
+fn log_curves(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
+    let curves = learning_curves(study);
+    let methods: Vec<&String> = {
+        let mut m: Vec<&String> = curves.keys().map(|k| &k.2).collect();
+        m.sort();
+        m.dedup();
+        m
+    };
+    for ((region, distribution, method), points) in &curves {
+        let path = format!("curves/{region}/{distribution}/{method}");
+        let color = palette(methods.iter().position(|m| *m == method).unwrap_or(0));
+        rec.log_static(
+            path.as_str(),
+            &SeriesLines::new()
+                .with_names([format!("{method} {distribution}")])
+                .with_colors([color])
+                .with_widths([2.0f32]),
+        )
+        .map_err(rerun_error)?;
+        for &(n, value) in points {
+            rec.set_time_sequence(N_TRAIN_TIMELINE, n as i64);
+            rec.log(path.as_str(), &Scalars::single(value))
+                .map_err(rerun_error)?;
+        }
+        rec.reset_time();
+    }
+    Ok(())
+}

@@ -1,0 +1,144 @@
+//! The study: every (region, layout, method, training-set size, seed) run of a scenario's `[study]` section,
+//! judged against the truth — *how many tracker points, placed how, with which method*.
+//!
+//! This file holds the data the stages exchange: the configuration, one [`RunMetrics`] per run (a row of
+//! `metrics.csv`), and the [`Detail`] of one representative run that the report's histograms and the rerun
+//! recording show point by point. SI units throughout; the report converts to millimetres.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::campaign::{DistributionKind, RegionConfig};
+use crate::eval::Stats;
+use crate::scenario::Scenario;
+
+pub mod sweep;
+
+fn default_validation_ratio() -> f64 {
+    0.5
+}
+
+/// The `[study]` section of a scenario.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct StudyConfig {
+    /// Training-set sizes (points), each a separate campaign.
+    pub sizes: Vec<usize>,
+    /// Point layouts to compare.
+    pub distributions: Vec<DistributionKind>,
+    /// Methods by name (as `calibrate --method`); the oracle is always run as the floor.
+    pub methods: Vec<String>,
+    /// Repetitions: seeds 0..seeds of the campaign draws (layout, orientations, noise); the robot stays the
+    /// scenario's one.
+    pub seeds: u64,
+    /// Validation points measured in addition to each training set, as a fraction of it (the paper's
+    /// 50 / 25 split gives 0.5); at least 1 point.
+    #[serde(default = "default_validation_ratio")]
+    pub validation_ratio: f64,
+    /// Measured test points per region: one fixed uniform campaign shared by every run.
+    pub test_points: usize,
+    /// Noise-free ground-truth grid points per region, shared by every run.
+    pub grid_points: usize,
+    /// Thickness (m) and points of the shell just outside each region.
+    pub shell_width_m: f64,
+    pub shell_points: usize,
+    /// Ground-truth targets per region for the closed-loop view.
+    pub closed_loop_points: usize,
+    /// The method shown point by point (error arrows, residual grid); the first method when absent.
+    #[serde(default)]
+    pub detail_method: Option<String>,
+}
+
+/// Which run: the key of a `metrics.csv` row.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct RunKey {
+    pub region: String,
+    pub distribution: DistributionKind,
+    pub method: String,
+    pub n_train: usize,
+    pub seed: u64,
+}
+
+/// One run's outcome: a `metrics.csv` row. Statistics in metres and radians.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RunMetrics {
+    pub key: RunKey,
+    /// `None` when the run succeeded; the reason when it failed (the sweep goes on).
+    pub failure: Option<String>,
+    /// Held-out test split: measured vs predicted.
+    pub test: Option<Stats>,
+    /// Noise-free ground-truth grid: true vs predicted.
+    pub truth: Option<Stats>,
+    /// The shell just outside the region.
+    pub outside: Option<Stats>,
+    /// Closed loop: distance to ground-truth targets reached through the method's inverse.
+    pub closed_loop: Option<Stats>,
+    /// The oracle's ground-truth mean for the same campaign (the floor), m.
+    pub floor_mean: Option<f64>,
+    /// Orientation errors (rad) when the campaign measures orientation.
+    pub test_orientation: Option<Stats>,
+    pub truth_orientation: Option<Stats>,
+    /// Wall time of the fit (ms); the only field that varies between two runs of the same scenario.
+    pub fit_ms: f64,
+}
+
+/// Per-point errors of one view, for histograms (m).
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct BeforeAfter {
+    pub before: Vec<f64>,
+    pub after: Vec<f64>,
+}
+
+/// One measured point of the detail campaign, in the world frame.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct DetailPoint {
+    pub q_cmd: Vec<f64>,
+    /// True flange pose (the robot drawn at this point).
+    pub true_flange: Isometry3<f64>,
+    /// Where the point really was (world frame).
+    pub true_position: Point3<f64>,
+    /// Error before calibration: nominal prediction − true position (m, world frame).
+    pub error_before: Vector3<f64>,
+    /// Error after calibration with the detail method: its prediction − true position (m, world frame).
+    pub error_after: Vector3<f64>,
+}
+
+/// A ground-truth grid point with the detail method's residual error.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct GridPoint {
+    pub true_position: Point3<f64>,
+    /// |prediction − truth| of the detail method (m).
+    pub residual: f64,
+}
+
+/// The run shown point by point: the largest size, the first layout and seed, of the first region.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Detail {
+    pub region: String,
+    pub distribution: DistributionKind,
+    pub method: String,
+    pub n_train: usize,
+    /// Training and validation points of the campaign.
+    pub points: Vec<DetailPoint>,
+    /// The region's ground-truth grid with the detail method's residuals.
+    pub grid: Vec<GridPoint>,
+    /// Test-split errors before (nominal) and after, per method, at the largest size (first layout and seed).
+    pub histograms: BTreeMap<String, BeforeAfter>,
+    /// The tracker's true pose (world ← tracker), for drawing it and its beams.
+    pub tracker: Isometry3<f64>,
+}
+
+/// Everything the report and the recording need.
+#[derive(Clone, Debug, Serialize)]
+pub struct StudyResult {
+    pub scenario: Scenario,
+    pub config: StudyConfig,
+    pub regions: Vec<RegionConfig>,
+    /// Every run, in a fixed order (region, distribution, method, size, seed): independent of threads.
+    pub runs: Vec<RunMetrics>,
+    pub detail: Detail,
+    /// Whether the campaign measures orientation (three reflectors).
+    pub orientation: bool,
+}

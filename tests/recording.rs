@@ -1,0 +1,404 @@
+//! The rerun recording: decode `campaign.rrd` bytes back in Rust and check the documented entity paths, their
+//! archetypes and their row counts.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use calibench::campaign::DistributionKind;
+use calibench::eval::Stats;
+use calibench::report::recording::{self, arrow_factor};
+use calibench::robot::{Chain, flange_pose, urdf};
+use calibench::scenario::Scenario;
+use calibench::study::{
+    BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
+};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rerun::external::re_log_encoding::DecoderApp;
+use rerun::log::{Chunk, LogMsg};
+
+const SIZES: [usize; 3] = [10, 20, 40];
+const SEEDS: u64 = 3;
+const METHODS: [&str; 2] = ["kinematic", "residual-ridge"];
+const DISTRIBUTIONS: [DistributionKind; 2] = [DistributionKind::Uniform, DistributionKind::Sobol];
+const N_POINTS: usize = 7;
+const N_GRID: usize = 12;
+
+fn chain() -> Chain {
+    urdf::load_file("robots/iiwa7.urdf", None).expect("iiwa7 URDF")
+}
+
+fn stats(mean: f64) -> Stats {
+    Stats::of(&[mean * 0.5, mean, mean * 1.5]).expect("finite stats")
+}
+
+/// A hand-made study: a few detail points on the iiwa, a small grid, two methods × two layouts × three sizes
+/// × three seeds of runs (one of them failed).
+fn study(chain: &Chain) -> StudyResult {
+    let scenario = Scenario::load("scenarios/paper_iiwa.toml").expect("shipped scenario");
+    let regions = scenario.regions.clone();
+    let region = regions[0].name.clone();
+
+    let mut runs = Vec::new();
+    for distribution in DISTRIBUTIONS {
+        for (m, method) in METHODS.iter().enumerate() {
+            for &n_train in &SIZES {
+                for seed in 0..SEEDS {
+                    let mean = 1e-3 / (n_train as f64).sqrt()
+                        * (1.0 + m as f64)
+                        * (1.0 + seed as f64 * 0.1);
+                    // One failed run: the curve must skip it, not lose the size.
+                    let failed = m == 1 && n_train == SIZES[0] && seed == 2;
+                    runs.push(RunMetrics {
+                        key: RunKey {
+                            region: region.clone(),
+                            distribution,
+                            method: method.to_string(),
+                            n_train,
+                            seed,
+                        },
+                        failure: failed.then(|| "did not converge".to_string()),
+                        test: (!failed).then(|| stats(mean)),
+                        truth: (!failed).then(|| stats(mean)),
+                        outside: None,
+                        closed_loop: None,
+                        floor_mean: None,
+                        test_orientation: None,
+                        truth_orientation: None,
+                        fit_ms: 1.0,
+                    });
+                }
+            }
+        }
+    }
+
+    let q_base = [0.0, 0.5, 0.0, -1.4, 0.0, 0.6, 0.0];
+    let points: Vec<DetailPoint> = (0..N_POINTS)
+        .map(|k| {
+            let t = k as f64 / N_POINTS as f64;
+            let q_cmd: Vec<f64> = q_base
+                .iter()
+                .enumerate()
+                .map(|(j, q)| q + 0.3 * (t * 6.0 + j as f64).sin())
+                .collect();
+            let true_flange = flange_pose(chain, &q_cmd);
+            let true_position = Point3::from(true_flange.translation.vector);
+            let error_before = Vector3::new(0.8e-3 * t, -0.5e-3, 0.3e-3 * (1.0 - t));
+            DetailPoint {
+                q_cmd,
+                true_flange,
+                true_position,
+                error_before,
+                error_after: error_before * 0.05,
+            }
+        })
+        .collect();
+    let grid: Vec<GridPoint> = (0..N_GRID)
+        .map(|k| GridPoint {
+            true_position: Point3::new(0.6, -0.3 + 0.05 * k as f64, 0.4),
+            residual: 1e-5 * (1 + k) as f64,
+        })
+        .collect();
+    let histograms = METHODS
+        .iter()
+        .map(|m| {
+            (
+                m.to_string(),
+                BeforeAfter {
+                    before: points.iter().map(|p| p.error_before.norm()).collect(),
+                    after: points.iter().map(|p| p.error_after.norm()).collect(),
+                },
+            )
+        })
+        .collect();
+    let tracker = Isometry3::from_parts(
+        Translation3::new(2.2, 0.3, 0.9),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::PI),
+    );
+    let detail = Detail {
+        region: region.clone(),
+        distribution: DistributionKind::Uniform,
+        method: METHODS[0].to_string(),
+        n_train: SIZES[2],
+        points,
+        grid,
+        histograms,
+        tracker,
+    };
+
+    let config = StudyConfig {
+        sizes: SIZES.to_vec(),
+        distributions: DISTRIBUTIONS.to_vec(),
+        methods: METHODS.iter().map(|m| m.to_string()).collect(),
+        seeds: SEEDS,
+        validation_ratio: 0.5,
+        test_points: 10,
+        grid_points: N_GRID,
+        shell_width_m: 0.05,
+        shell_points: 10,
+        closed_loop_points: 5,
+        detail_method: None,
+    };
+    StudyResult {
+        scenario,
+        config,
+        regions,
+        runs,
+        detail,
+        orientation: false,
+    }
+}
+
+/// What one entity holds across the whole recording.
+#[derive(Default, Debug)]
+struct Entity {
+    /// Component identifiers, e.g. `Points3D:positions`.
+    components: BTreeSet<String>,
+    static_rows: usize,
+    /// Rows per timeline name.
+    timeline_rows: BTreeMap<String, usize>,
+    /// Distinct times per timeline.
+    times: BTreeMap<String, BTreeSet<i64>>,
+}
+
+fn decode(bytes: &[u8]) -> BTreeMap<String, Entity> {
+    let mut entities: BTreeMap<String, Entity> = BTreeMap::new();
+    let decoder = DecoderApp::decode_eager(bytes).expect("an .rrd stream");
+    for msg in decoder {
+        let msg = msg.expect("a decodable message");
+        let LogMsg::ArrowMsg(_, arrow) = msg else {
+            continue;
+        };
+        let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk");
+        // Rerun prints paths with a leading `/`; the documented scheme has none (the root stays `/`).
+        let path = chunk.entity_path().to_string();
+        let path = match path.trim_start_matches('/') {
+            "" => "/".to_string(),
+            p => p.to_string(),
+        };
+        let entity = entities.entry(path).or_default();
+        entity.components.extend(
+            chunk
+                .components()
+                .component_descriptors()
+                .map(|d| d.component.to_string()),
+        );
+        if chunk.is_static() {
+            entity.static_rows += chunk.num_rows();
+        }
+        for (name, column) in chunk.timelines() {
+            *entity.timeline_rows.entry(name.to_string()).or_default() += chunk.num_rows();
+            entity
+                .times
+                .entry(name.to_string())
+                .or_default()
+                .extend(column.times_raw().iter().copied());
+        }
+    }
+    entities
+}
+
+fn entity<'a>(entities: &'a BTreeMap<String, Entity>, path: &str) -> &'a Entity {
+    entities.get(path).unwrap_or_else(|| {
+        panic!(
+            "no entity {path}; the recording has {:?}",
+            entities.keys().collect::<Vec<_>>()
+        )
+    })
+}
+
+fn assert_has(entity: &Entity, path: &str, components: &[&str]) {
+    for c in components {
+        assert!(
+            entity.components.contains(*c),
+            "{path} lacks {c}; it has {:?}",
+            entity.components
+        );
+    }
+}
+
+#[test]
+fn recording_holds_the_documented_entities() {
+    let chain = chain();
+    let study = study(&chain);
+    let bytes = recording::record(&study, &chain, "# Summary\n\nA test.\n").expect("recording");
+    assert!(bytes.len() > 1000, "recording of {} bytes", bytes.len());
+    eprintln!("recording: {} bytes", bytes.len());
+    if let Ok(path) = std::env::var("CALIBENCH_RRD_OUT") {
+        std::fs::write(&path, &bytes).expect("write the recording");
+    }
+    let entities = decode(&bytes);
+
+    // Z up at the root.
+    assert_has(entity(&entities, "/"), "/", &["ViewCoordinates:xyz"]);
+
+    // The robot: one transform per body per detail point on the `point` timeline, shapes static.
+    let mut shapes = 0;
+    for (i, body) in chain.bodies.iter().enumerate() {
+        let path = format!("world/robot/link_{i}");
+        let link = entity(&entities, &path);
+        assert_has(
+            link,
+            &path,
+            &["Transform3D:translation", "Transform3D:quaternion"],
+        );
+        assert_eq!(link.timeline_rows.get("point"), Some(&N_POINTS), "{path}");
+        assert_eq!(link.times["point"].len(), N_POINTS, "{path}");
+        assert!(
+            !link.timeline_rows.contains_key("log_time"),
+            "log_time must be off"
+        );
+        for collider in &body.colliders {
+            let (child, component) = match collider.shape {
+                calibench::robot::Shape::Cylinder { .. } => ("cylinders", "Cylinders3D:lengths"),
+                calibench::robot::Shape::Capsule { .. } => ("capsules", "Capsules3D:lengths"),
+                calibench::robot::Shape::Sphere { .. } => ("spheres", "Ellipsoids3D:half_sizes"),
+                calibench::robot::Shape::Cuboid { .. } => ("boxes", "Boxes3D:half_sizes"),
+            };
+            let path = format!("world/robot/link_{i}/{child}");
+            let shape = entity(&entities, &path);
+            assert_has(shape, &path, &[component]);
+            assert_eq!(shape.static_rows, 1, "{path}");
+        }
+        shapes += body.colliders.len();
+    }
+    assert!(shapes > 0, "the iiwa has collision shapes");
+    let skeleton = entity(&entities, "world/robot/skeleton");
+    assert_has(skeleton, "world/robot/skeleton", &["LineStrips3D:strips"]);
+    assert_eq!(skeleton.timeline_rows.get("point"), Some(&N_POINTS));
+    let flange = entity(&entities, "world/robot/flange");
+    assert_has(
+        flange,
+        "world/robot/flange",
+        &["Transform3D:translation", "TransformAxes3D:axis_length"],
+    );
+    assert_eq!(flange.timeline_rows.get("point"), Some(&N_POINTS));
+
+    // Regions.
+    for region in &study.regions {
+        let path = format!("world/regions/{}", recording::sanitize(&region.name));
+        let e = entity(&entities, &path);
+        assert_has(e, &path, &["Boxes3D:half_sizes", "Boxes3D:centers"]);
+        assert_eq!(e.static_rows, 1, "{path}");
+    }
+
+    // Tracker and beams.
+    let tracker = entity(&entities, "world/tracker");
+    assert_has(
+        tracker,
+        "world/tracker",
+        &[
+            "Transform3D:translation",
+            "TransformAxes3D:axis_length",
+            "Ellipsoids3D:half_sizes",
+        ],
+    );
+    assert_has(
+        entity(&entities, "world/tracker/beams"),
+        "world/tracker/beams",
+        &["LineStrips3D:strips"],
+    );
+    assert_eq!(
+        entity(&entities, "world/tracker/beam")
+            .timeline_rows
+            .get("point"),
+        Some(&N_POINTS)
+    );
+
+    // Points, arrows, grid: static, one row each (instance counts checked in the library's own terms).
+    let factor = arrow_factor(&study.detail.points);
+    assert!(factor > 1, "sub-millimetre errors are magnified");
+    let method = &study.detail.method;
+    for (path, components) in [
+        (
+            "world/points/before".to_string(),
+            &["Points3D:positions", "Points3D:colors"][..],
+        ),
+        (
+            format!("world/arrows/before_x{factor}"),
+            &["Arrows3D:vectors", "Arrows3D:origins", "Arrows3D:colors"][..],
+        ),
+        (
+            format!("world/arrows/after_x{factor}_{method}"),
+            &["Arrows3D:vectors", "Arrows3D:origins", "Arrows3D:colors"][..],
+        ),
+        (
+            format!("world/grid/{method}"),
+            &["Points3D:positions", "Points3D:colors"][..],
+        ),
+    ] {
+        let e = entity(&entities, &path);
+        assert_has(e, &path, components);
+        assert_eq!(e.static_rows, 1, "{path}");
+        assert!(e.timeline_rows.is_empty(), "{path} is static");
+    }
+
+    // Histograms: one entity per method and side.
+    let histogram_methods: BTreeSet<&str> = entities
+        .keys()
+        .filter_map(|k| k.strip_prefix("histograms/"))
+        .filter_map(|k| k.split('/').next())
+        .collect();
+    assert_eq!(histogram_methods, METHODS.iter().copied().collect());
+    for m in METHODS {
+        for side in ["before", "after"] {
+            let path = format!("histograms/{m}/{side}");
+            let e = entity(&entities, &path);
+            assert_has(e, &path, &["BarChart:values", "BarChart:abscissa"]);
+            assert_eq!(e.static_rows, 1, "{path}");
+        }
+    }
+
+    // Learning curves: one series per region × layout × method, one row per size, a named series.
+    let region = recording::sanitize(&study.regions[0].name);
+    let curve_paths: BTreeSet<&String> = entities
+        .keys()
+        .filter(|k| k.starts_with("curves/"))
+        .collect();
+    assert_eq!(curve_paths.len(), DISTRIBUTIONS.len() * METHODS.len());
+    for distribution in DISTRIBUTIONS {
+        for m in METHODS {
+            let path = format!("curves/{region}/{}/{m}", distribution.name());
+            let e = entity(&entities, &path);
+            assert_has(e, &path, &["Scalars:scalars", "SeriesLines:names"]);
+            assert_eq!(e.timeline_rows.get("n_train"), Some(&SIZES.len()), "{path}");
+            assert_eq!(
+                e.times["n_train"],
+                SIZES.iter().map(|&n| n as i64).collect::<BTreeSet<_>>(),
+                "{path}"
+            );
+            assert!(
+                !e.timeline_rows.contains_key("point"),
+                "{path} must not carry the point timeline"
+            );
+        }
+    }
+    let curves = recording::learning_curves(&study);
+    let failed_size = &curves[&(
+        region.clone(),
+        "uniform".to_string(),
+        "residual-ridge".to_string(),
+    )];
+    assert_eq!(failed_size.len(), SIZES.len());
+
+    // Documents.
+    for path in ["summary", "legend"] {
+        let e = entity(&entities, path);
+        assert_has(e, path, &["TextDocument:text", "TextDocument:media_type"]);
+        assert_eq!(e.static_rows, 1, "{path}");
+    }
+}
+
+#[test]
+fn arrow_factor_is_a_1_2_5_number_under_the_target() {
+    let point = |e: f64| DetailPoint {
+        q_cmd: vec![0.0; 7],
+        true_flange: Isometry3::identity(),
+        true_position: Point3::origin(),
+        error_before: Vector3::new(e, 0.0, 0.0),
+        error_after: Vector3::zeros(),
+    };
+    assert_eq!(arrow_factor(&[point(1e-3)]), 100);
+    assert_eq!(arrow_factor(&[point(3e-3)]), 20);
+    assert_eq!(arrow_factor(&[point(0.4e-3), point(-0.9e-3)]), 100);
+    assert_eq!(arrow_factor(&[point(0.3)]), 1);
+    assert_eq!(arrow_factor(&[]), 1);
+}

@@ -1,0 +1,123 @@
+//! The study through the `campaign` binary: thread-count independence of the files a person or a script reads,
+//! bad study inputs, and an interrupted run leaving nothing behind.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::Duration;
+
+use common::{assert_clean_failure, edit, files_under, read};
+
+const DEFAULT: &str = include_str!("../scenarios/default.toml");
+
+/// The default study made small: two sizes, two layouts, three methods, two seeds, small shared sets.
+fn small_study() -> String {
+    let mut text = edit(
+        DEFAULT,
+        "sizes = [15, 30, 60, 125, 250, 500, 1000]",
+        "sizes = [20, 40]",
+    );
+    text = edit(
+        &text,
+        r#"distributions = ["uniform", "grid", "sobol", "latin-hypercube"]"#,
+        r#"distributions = ["uniform", "sobol"]"#,
+    );
+    text = edit(
+        &text,
+        r#"methods = ["nominal", "paper-rotz", "paper-rotxyz", "paper-rotxyz-transxyz", "kinematic", "elastic",
+           "residual-ridge", "hybrid", "hybrid-kinematic"]"#,
+        r#"methods = ["nominal", "paper-rotz", "hybrid"]"#,
+    );
+    text = edit(&text, "seeds = 5 ", "seeds = 2 ");
+    text = edit(&text, "test_points = 500 ", "test_points = 60 ");
+    text = edit(&text, "grid_points = 1000 ", "grid_points = 60 ");
+    text = edit(&text, "shell_points = 200", "shell_points = 30");
+    text = edit(&text, "closed_loop_points = 100", "closed_loop_points = 20");
+    edit(&text, "points = 2335", "points = 200")
+}
+
+fn campaign(scenario: &Path, out: &Path, threads: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_campaign"))
+        .arg(scenario)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", threads])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the campaign binary starts")
+}
+
+#[test]
+fn metrics_and_summary_do_not_depend_on_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("small.toml");
+    std::fs::write(&scenario, small_study()).unwrap();
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    for (out, threads) in [(&one, "1"), (&two, "2")] {
+        let o = campaign(&scenario, out, threads);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    for file in ["metrics.csv", "summary.md", "measurements.csv"] {
+        assert_eq!(
+            read(&one.join(file)),
+            read(&two.join(file)),
+            "{file} differs between 1 and 2 threads"
+        );
+    }
+    let metrics = String::from_utf8(read(&one.join("metrics.csv"))).unwrap();
+    // 1 region × 2 layouts × 3 methods × 2 sizes × 2 seeds, plus the header.
+    assert_eq!(metrics.lines().count(), 1 + 24);
+    for name in [
+        "campaign.rrd",
+        "plots/learning_curves_paper.png",
+        "plots/histogram_hybrid.png",
+    ] {
+        assert!(one.join(name).is_file(), "{name} missing");
+    }
+}
+
+#[test]
+fn bad_study_inputs_are_one_line_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("sizes = [20, 40]", "sizes = []", "study.sizes"),
+        ("sizes = [20, 40]", "sizes = [20, 5000]", "5000"),
+        (
+            r#"methods = ["nominal", "paper-rotz", "hybrid"]"#,
+            r#"methods = ["nominal", "magic"]"#,
+            "magic",
+        ),
+        (
+            r#"distributions = ["uniform", "sobol"]"#,
+            r#"distributions = ["uniform", "spiral"]"#,
+            "spiral",
+        ),
+    ];
+    for (i, (from, to, needle)) in cases.iter().enumerate() {
+        let scenario = dir.path().join(format!("bad{i}.toml"));
+        std::fs::write(&scenario, edit(&small_study(), from, to)).unwrap();
+        let out = dir.path().join(format!("out{i}"));
+        assert_clean_failure(&campaign(&scenario, &out, "2"), &out, &[needle]);
+    }
+}
+
+#[test]
+fn an_interrupted_study_leaves_no_partial_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_campaign"))
+        .arg("--out")
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("the campaign binary starts");
+    // The default study takes far longer than this; everything is written at its very end.
+    std::thread::sleep(Duration::from_millis(1500));
+    child.kill().expect("the study is still running");
+    child.wait().unwrap();
+    let left = files_under(&out);
+    assert!(left.is_empty(), "an interrupted run left {left:?}");
+}
