@@ -692,3 +692,59 @@ fn repeated_fits_are_byte_identical() {
         }
     }
 }
+
+/// A configuration where the inverse is undefined (the iiwa standing straight up: joints 2, 4 and 6 at zero put
+/// axes 1, 3, 5 and 7 on one line) gets its prediction and an empty command with the reason; the others are
+/// commanded as usual, and the file is written.
+#[test]
+fn apply_reports_a_singular_configuration_per_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = campaign(&dir, "small", &small_paper(POINTS)).join("measurements.csv");
+    let fitted = dir.path().join("fit");
+    fit_ok(&data, &fitted, &["--method", "paper-rotxyz"]);
+    let joints = dir.path().join("joints.csv");
+    let names: Vec<String> = (1..=7).map(|i| format!("iiwa_joint_{i}")).collect();
+    std::fs::write(
+        &joints,
+        format!(
+            "point_id,{}\nstraight,0,0,0,0,0,0,0\nbent,0.1,0.6,0.0,-1.6,0.0,-0.8,0.0\n",
+            names.join(",")
+        ),
+    )
+    .unwrap();
+    let applied = dir.path().join("applied.csv");
+    let output = calibrate(&[
+        "apply".as_ref(),
+        "--model".as_ref(),
+        fitted.join("model.json").as_os_str(),
+        "--data".as_ref(),
+        joints.as_os_str(),
+        "--out".as_ref(),
+        applied.as_os_str(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let mut reader = csv::Reader::from_path(&applied).unwrap();
+    let header = reader.headers().unwrap().clone();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+    assert_eq!(rows.len(), 2);
+    let (straight, bent) = (&rows[0], &rows[1]);
+    assert!(
+        straight[col("status")].starts_with("no command"),
+        "{:?}",
+        straight
+    );
+    assert!(straight[col("cmd_iiwa_joint_1")].is_empty());
+    assert!(
+        straight[col("predicted_x")]
+            .parse::<f64>()
+            .unwrap()
+            .is_finite()
+    );
+    assert_eq!(&bent[col("status")], "ok");
+    assert!(bent[col("compensation_residual_m")].parse::<f64>().unwrap() <= 1e-9);
+}

@@ -600,17 +600,30 @@ fn apply(args: &ApplyArgs) -> Result<()> {
     );
     header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
     header.push("compensation_residual_m".into());
+    header.push("status".into());
     w.write_record(&header).map_err(csv_err)?;
+    // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
+    // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
+    let mut singular = 0;
     for (id, q) in ids.iter().zip(&configurations) {
         let p = model.predict(q);
-        let (command, residual) = model.compensate(q)?;
         let r: UnitQuaternion<f64> = p.orientation;
         let pos: Point3<f64> = p.position;
         let mut row = vec![id.clone()];
         row.extend(q.iter().map(|v| v.to_string()));
         row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
-        row.extend(command.iter().map(|v| v.to_string()));
-        row.push(residual.to_string());
+        match model.compensate(q) {
+            Ok((command, residual)) => {
+                row.extend(command.iter().map(|v| v.to_string()));
+                row.push(residual.to_string());
+                row.push("ok".into());
+            }
+            Err(e) => {
+                singular += 1;
+                row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
+                row.push(format!("no command: {e}"));
+            }
+        }
         w.write_record(&row).map_err(csv_err)?;
     }
     let bytes = w
@@ -619,9 +632,14 @@ fn apply(args: &ApplyArgs) -> Result<()> {
     let (dir, name) = split_path(&args.out)?;
     output::write_files(dir, &[(name, bytes)])?;
     println!(
-        "{} configurations: predicted poses and corrected commands in {}",
+        "{} configurations: predicted poses and corrected commands in {}{}",
         ids.len(),
-        args.out.display()
+        args.out.display(),
+        if singular > 0 {
+            format!(" ({singular} without a command: the inverse is undefined there, see `status`)")
+        } else {
+            String::new()
+        }
     );
     Ok(())
 }
