@@ -98,7 +98,7 @@ impl Dataset {
         origin: &str,
         joint_names: &[String],
     ) -> Result<Dataset> {
-        let table = Table::load(reader, origin)?;
+        let table = Table::load(reader, origin, Dialect::PLAIN)?;
         let joints = table.joint_columns(joint_names)?;
         let measured_cols = table.reflectors("")?.ok_or_else(|| {
             let missing = ["x1", "y1", "z1"]
@@ -244,7 +244,7 @@ impl Truth {
 
     /// Reads truth CSV text from `reader`; `origin` names it in messages.
     pub fn from_reader(reader: impl std::io::Read, origin: &str) -> Result<Truth> {
-        let table = Table::load(reader, origin)?;
+        let table = Table::load(reader, origin, Dialect::PLAIN)?;
         let required = |prefix: &str| -> Result<Vec<[usize; 3]>> {
             table.reflectors(prefix)?.ok_or_else(|| {
                 table.error(format!(
@@ -350,7 +350,7 @@ pub fn joints_from_reader(
     origin: &str,
     joint_names: &[String],
 ) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
-    let table = Table::load(reader, origin)?;
+    let table = Table::load(reader, origin, Dialect::PLAIN)?;
     let joints = table.joint_columns(joint_names)?;
     let q = (0..table.rows.len())
         .map(|r| table.numbers(r, &joints))
@@ -433,16 +433,43 @@ fn open(path: &Path) -> Result<std::fs::File> {
     })
 }
 
-/// A CSV file held in memory, with its columns by name and every row of the header's length.
+/// How a delimited file is written: `,` and `.` for the project's own files, anything for a mapped export.
+#[derive(Clone, Copy, Debug)]
+struct Dialect {
+    delimiter: u8,
+    decimal: char,
+    /// Read through a column mapping: messages then name the mapping's settings, rows of empty cells are
+    /// skipped, and a header of one column hints at a wrong delimiter.
+    mapped: bool,
+}
+
+impl Dialect {
+    const PLAIN: Dialect = Dialect {
+        delimiter: b',',
+        decimal: '.',
+        mapped: false,
+    };
+
+    fn mapped(delimiter: u8, decimal: char) -> Dialect {
+        Dialect {
+            delimiter,
+            decimal,
+            mapped: true,
+        }
+    }
+}
+
+/// A delimited file held in memory, every row of the header's length.
 struct Table {
     origin: String,
     headers: Vec<String>,
     index: HashMap<String, usize>,
     rows: Vec<csv::StringRecord>,
+    dialect: Dialect,
 }
 
 impl Table {
-    fn load(reader: impl std::io::Read, origin: &str) -> Result<Table> {
+    fn load(reader: impl std::io::Read, origin: &str, dialect: Dialect) -> Result<Table> {
         let err = |message: String| Error::Data {
             origin: origin.to_string(),
             message,
@@ -456,7 +483,9 @@ impl Table {
             };
             err(format!("{}{message}", row.unwrap_or_default()))
         };
+        let delimiter = (dialect.delimiter as char).escape_default();
         let mut csv = csv::ReaderBuilder::new()
+            .delimiter(dialect.delimiter)
             .flexible(true)
             .trim(csv::Trim::All)
             .from_reader(reader);
@@ -464,18 +493,16 @@ impl Table {
             .headers()
             .map_err(csv_err)?
             .iter()
-            .enumerate()
-            .map(|(i, h)| {
-                let h = if i == 0 {
-                    h.trim_start_matches('\u{feff}').trim()
-                } else {
-                    h
-                };
-                h.to_string()
-            })
+            .map(|h| h.trim_start_matches('\u{feff}').trim().to_string())
             .collect();
-        if headers.is_empty() || headers.iter().all(String::is_empty) {
+        if headers.iter().all(String::is_empty) {
             return Err(err("empty file: no header row".into()));
+        }
+        if dialect.mapped && headers.len() == 1 {
+            let shown: String = headers[0].chars().take(40).collect();
+            return Err(err(format!(
+                "row 1: one column only with delimiter '{delimiter}' (the header reads '{shown}…'); is the delimiter right?"
+            )));
         }
         let mut index = HashMap::new();
         for (i, h) in headers.iter().enumerate() {
@@ -493,9 +520,17 @@ impl Table {
         let mut rows = Vec::new();
         for record in csv.records() {
             let record = record.map_err(csv_err)?;
+            if dialect.mapped && record.iter().all(str::is_empty) {
+                continue;
+            }
             if record.len() != headers.len() {
+                let hint = if dialect.mapped {
+                    format!(" (delimiter '{delimiter}')")
+                } else {
+                    String::new()
+                };
                 return Err(err(format!(
-                    "row {}: {} fields, the header has {}",
+                    "row {}: {} fields, the header has {}{hint}",
                     rows.len() + 2,
                     record.len(),
                     headers.len()
@@ -511,6 +546,28 @@ impl Table {
             headers,
             index,
             rows,
+            dialect,
+        })
+    }
+
+    /// The column `name`, which a mapping gives as `role`; an error naming both and what the header has.
+    fn find(&self, name: &str, role: &str) -> Result<usize> {
+        self.index.get(name.trim()).copied().ok_or_else(|| {
+            const SHOWN: usize = 16;
+            let mut names: Vec<&str> = self
+                .headers
+                .iter()
+                .take(SHOWN)
+                .map(String::as_str)
+                .collect();
+            if self.headers.len() > SHOWN {
+                names.push("…");
+            }
+            self.error(format!(
+                "no column '{name}' (the mapping's {role}); the header has {} columns: {}",
+                self.headers.len(),
+                names.join(", ")
+            ))
         })
     }
 
@@ -550,14 +607,34 @@ impl Table {
         &self.rows[r][c]
     }
 
+    /// A number in the file's dialect (a mapped export may write a decimal comma).
     fn number(&self, r: usize, c: usize) -> Result<f64> {
         let cell = self.cell(r, c);
         if cell.is_empty() {
             return Err(self.error(format!("{}: empty, a number is needed", self.at(r, c))));
         }
-        let value: f64 = cell
-            .parse()
-            .map_err(|_| self.error(format!("{}: '{cell}' is not a number", self.at(r, c))))?;
+        let decimal = self.dialect.decimal;
+        let not_a_number = || {
+            let hint = if self.dialect.mapped {
+                format!(" (the mapping's decimal separator is '{decimal}')")
+            } else {
+                String::new()
+            };
+            self.error(format!("{}: '{cell}' is not a number{hint}", self.at(r, c)))
+        };
+        let value: f64 = if decimal == '.' {
+            if self.dialect.mapped && cell.contains(',') {
+                return Err(not_a_number());
+            }
+            cell.parse().map_err(|_| not_a_number())?
+        } else {
+            if cell.contains('.') {
+                return Err(not_a_number());
+            }
+            cell.replace(decimal, ".")
+                .parse()
+                .map_err(|_| not_a_number())?
+        };
         if !value.is_finite() {
             return Err(self.error(format!("{}: '{cell}' is not finite", self.at(r, c))));
         }

@@ -39,6 +39,7 @@ use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::{Dataset, ExtraInputs, Split};
+use super::{Dialect, Table};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::chain::JointKind;
@@ -369,8 +370,10 @@ impl ColumnMapping {
         Table::load(
             file,
             origin,
-            self.delimiter_byte().map_err(err)?,
-            self.decimal_char().map_err(err)?,
+            Dialect::mapped(
+                self.delimiter_byte().map_err(err)?,
+                self.decimal_char().map_err(err)?,
+            ),
         )
     }
 
@@ -423,7 +426,11 @@ impl ColumnMapping {
         };
         self.check().map_err(err)?;
         let decimal = self.decimal_char().map_err(err)?;
-        let table = Table::load(reader, origin, self.delimiter_byte().map_err(err)?, decimal)?;
+        let table = Table::load(
+            reader,
+            origin,
+            Dialect::mapped(self.delimiter_byte().map_err(err)?, decimal),
+        )?;
 
         let joint_names = chain.joint_names();
         let prismatic: Vec<bool> = chain
@@ -560,164 +567,6 @@ impl ColumnMapping {
                 values: inputs,
             }),
         })
-    }
-}
-
-/// A delimited file held in memory, every row of the header's length.
-struct Table {
-    origin: String,
-    headers: Vec<String>,
-    index: HashMap<String, usize>,
-    rows: Vec<csv::StringRecord>,
-    decimal: char,
-}
-
-impl Table {
-    fn load(
-        reader: impl std::io::Read,
-        origin: &str,
-        delimiter: u8,
-        decimal: char,
-    ) -> Result<Table> {
-        let err = |message: String| Error::Data {
-            origin: origin.to_string(),
-            message,
-        };
-        let csv_err = |e: csv::Error| {
-            let row = e.position().map(|p| format!("row {}: ", p.record() + 1));
-            let message = match e.kind() {
-                csv::ErrorKind::Utf8 { .. } => "not valid UTF-8".to_string(),
-                csv::ErrorKind::Io(io) => format!("cannot read: {io}"),
-                _ => e.to_string(),
-            };
-            err(format!("{}{message}", row.unwrap_or_default()))
-        };
-        let mut csv = csv::ReaderBuilder::new()
-            .delimiter(delimiter)
-            .flexible(true)
-            .trim(csv::Trim::All)
-            .from_reader(reader);
-        let headers: Vec<String> = csv
-            .headers()
-            .map_err(csv_err)?
-            .iter()
-            .map(|h| h.trim_start_matches('\u{feff}').trim().to_string())
-            .collect();
-        if headers.iter().all(String::is_empty) {
-            return Err(err("empty file: no header row".into()));
-        }
-        if headers.len() == 1 {
-            let shown: String = headers[0].chars().take(40).collect();
-            return Err(err(format!(
-                "row 1: one column only with delimiter '{}' (the header reads '{shown}…'); is the delimiter right?",
-                (delimiter as char).escape_default()
-            )));
-        }
-        let mut index = HashMap::new();
-        for (i, h) in headers.iter().enumerate() {
-            if h.is_empty() {
-                continue;
-            }
-            if let Some(first) = index.insert(h.clone(), i) {
-                return Err(err(format!(
-                    "row 1: column '{h}' appears twice (columns {} and {})",
-                    first + 1,
-                    i + 1
-                )));
-            }
-        }
-        let mut rows = Vec::new();
-        for record in csv.records() {
-            let record = record.map_err(csv_err)?;
-            if record.iter().all(str::is_empty) {
-                continue;
-            }
-            if record.len() != headers.len() {
-                return Err(err(format!(
-                    "row {}: {} fields, the header has {} (delimiter '{}')",
-                    rows.len() + 2,
-                    record.len(),
-                    headers.len(),
-                    (delimiter as char).escape_default()
-                )));
-            }
-            rows.push(record);
-        }
-        if rows.is_empty() {
-            return Err(err("no data rows after the header".into()));
-        }
-        Ok(Table {
-            origin: origin.to_string(),
-            headers,
-            index,
-            rows,
-            decimal,
-        })
-    }
-
-    fn error(&self, message: String) -> Error {
-        Error::Data {
-            origin: self.origin.clone(),
-            message,
-        }
-    }
-
-    /// The column `name`, which the mapping gives as `role`; an error naming both and what the header has.
-    fn find(&self, name: &str, role: &str) -> Result<usize> {
-        self.index.get(name.trim()).copied().ok_or_else(|| {
-            const SHOWN: usize = 16;
-            let mut names: Vec<&str> = self
-                .headers
-                .iter()
-                .take(SHOWN)
-                .map(String::as_str)
-                .collect();
-            if self.headers.len() > SHOWN {
-                names.push("…");
-            }
-            self.error(format!(
-                "no column '{name}' (the mapping's {role}); the header has {} columns: {}",
-                self.headers.len(),
-                names.join(", ")
-            ))
-        })
-    }
-
-    fn at(&self, r: usize, c: usize) -> String {
-        format!("row {}, column {}", r + 2, self.headers[c])
-    }
-
-    fn cell(&self, r: usize, c: usize) -> &str {
-        &self.rows[r][c]
-    }
-
-    /// A number with the mapping's decimal separator.
-    fn number(&self, r: usize, c: usize) -> Result<f64> {
-        let cell = self.cell(r, c);
-        if cell.is_empty() {
-            return Err(self.error(format!("{}: empty, a number is needed", self.at(r, c))));
-        }
-        let other = if self.decimal == ',' { '.' } else { ',' };
-        let not_a_number = || {
-            self.error(format!(
-                "{}: '{cell}' is not a number (the mapping's decimal separator is '{}')",
-                self.at(r, c),
-                self.decimal
-            ))
-        };
-        if cell.contains(other) {
-            return Err(not_a_number());
-        }
-        let text = if self.decimal == ',' {
-            cell.replace(',', ".")
-        } else {
-            cell.to_string()
-        };
-        let value: f64 = text.parse().map_err(|_| not_a_number())?;
-        if !value.is_finite() {
-            return Err(self.error(format!("{}: '{cell}' is not finite", self.at(r, c))));
-        }
-        Ok(value)
     }
 }
 
