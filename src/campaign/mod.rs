@@ -26,9 +26,9 @@ pub struct Simulation {
     pub campaign: Campaign,
 }
 
-/// Builds the nominal and true robots, the tracker and the reflector mounting from a scenario, and runs its
-/// campaign. Every draw derives from the scenario seed.
-pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
+/// The scenario's nominal and true robots, tracker and reflector mounting, with no campaign yet. Every draw
+/// derives from the scenario seed, so every stage that needs the scenario's world gets the same one.
+pub fn world(scenario: &Scenario) -> Result<Simulation> {
     let nominal = scenario.load_robot()?;
     let perturbation = Perturbation::sample(
         &scenario.truth,
@@ -41,21 +41,31 @@ pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
         &scenario.reflectors,
         &mut derive(scenario.seed, Stream::Mounting, &[]),
     )?;
-    let campaign = Setup {
-        nominal: &nominal,
-        robot: &robot,
-        tracker: &tracker,
-        mounting: &mounting,
+    Ok(Simulation {
+        campaign: Campaign {
+            joint_names: nominal.joint_names(),
+            points: Vec::new(),
+            rejections: Default::default(),
+        },
+        nominal,
+        robot,
+        tracker,
+        mounting,
+    })
+}
+
+/// The scenario's world ([`world`]) and its campaign over every region.
+pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
+    let mut sim = world(scenario)?;
+    sim.campaign = Setup {
+        nominal: &sim.nominal,
+        robot: &sim.robot,
+        tracker: &sim.tracker,
+        mounting: &sim.mounting,
         config: &scenario.campaign,
         deflection: scenario.truth.deflection,
         seed: scenario.seed,
     }
     .run(&scenario.regions)?;
-    Ok(Simulation {
-        nominal,
-        robot,
-        tracker,
-        mounting,
-        campaign,
-    })
+    Ok(sim)
 }

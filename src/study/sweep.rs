@@ -40,9 +40,6 @@ use crate::eval::{Oracle, Stats};
 use crate::rng::{Stream, derive};
 use crate::robot::dh::DhChain;
 use crate::scenario::Scenario;
-use crate::tracker::Tracker;
-use crate::tracker::reflector::Mounting;
-use crate::truth::{Perturbation, TrueRobot};
 
 /// No ground-truth set, size or test set may ask for more points than this per region.
 const MAX_POINTS: usize = 1_000_000;
@@ -202,34 +199,6 @@ fn layout_index(d: DistributionKind) -> u64 {
         .expect("every layout is in ALL") as u64
 }
 
-/// The scenario's robots, tracker and mounting, as `simulate` draws them, without its campaign.
-fn world(scenario: &Scenario) -> Result<Simulation> {
-    let nominal = scenario.load_robot()?;
-    let perturbation = Perturbation::sample(
-        &scenario.truth,
-        nominal.dof(),
-        &mut derive(scenario.seed, Stream::Perturbation, &[]),
-    )?;
-    let robot = TrueRobot::new(&nominal, perturbation, scenario.robot.payload())?;
-    let tracker = Tracker::new(scenario.tracker.clone())?;
-    let mounting = Mounting::sample(
-        &scenario.reflectors,
-        &mut derive(scenario.seed, Stream::Mounting, &[]),
-    )?;
-    let campaign = Campaign {
-        joint_names: nominal.joint_names(),
-        points: Vec::new(),
-        rejections: BTreeMap::new(),
-    };
-    Ok(Simulation {
-        nominal,
-        robot,
-        tracker,
-        mounting,
-        campaign,
-    })
-}
-
 /// A campaign of `points` measured points in `region` with `layout`, drawn from `seed`.
 fn measure(
     scenario: &Scenario,
@@ -347,7 +316,7 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         .position(|m| m == config.detail_method())
         .unwrap_or(0);
 
-    let sim = world(scenario)?;
+    let sim = crate::campaign::world(scenario)?;
     let dh = DhChain::from_chain(&sim.nominal)?;
     let truth = GroundTruth::build(scenario, &sim, &config.ground_truth_config())?;
     let regions = scenario
