@@ -169,6 +169,29 @@ impl Dataset {
         })
     }
 
+    /// A dataset built in memory (a synthetic robot, a test): point ids are row numbers, and the optional
+    /// columns are absent until the caller sets them.
+    pub fn in_memory(
+        origin: &str,
+        joint_names: Vec<String>,
+        q: Vec<Vec<f64>>,
+        measured: Vec<Vec<Point3<f64>>>,
+    ) -> Dataset {
+        Dataset {
+            origin: origin.to_string(),
+            joint_names,
+            point_ids: (0..q.len()).map(|i| i.to_string()).collect(),
+            q,
+            measured,
+            nominal_reflectors: None,
+            nominal_flange: None,
+            split: None,
+            regions: None,
+            measured_orientation: None,
+            extra_inputs: None,
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.point_ids.len()
     }

@@ -52,19 +52,8 @@ fn synthetic(errors: &FrameErrors, n: usize, seed: u64) -> Synthetic {
         nominal.push(vec![dh.flange_pose(&qi) * mount_nominal]);
         q.push(qi);
     }
-    let data = Dataset {
-        origin: "synthetic".into(),
-        joint_names: chain.joint_names(),
-        point_ids: (0..n).map(|i| i.to_string()).collect(),
-        q,
-        measured,
-        nominal_reflectors: Some(nominal),
-        nominal_flange: None,
-        split: None,
-        regions: None,
-        measured_orientation: None,
-        extra_inputs: None,
-    };
+    let mut data = Dataset::in_memory("synthetic", chain.joint_names(), q, measured);
+    data.nominal_reflectors = Some(nominal);
     Synthetic {
         chain,
         dh,
