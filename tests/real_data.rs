@@ -14,14 +14,13 @@ use nalgebra::{Matrix3, Point3, Rotation3, UnitQuaternion};
 use tempfile::TempDir;
 
 use calibench::calib::method::{self, FitContext, MethodKind};
-use calibench::calib::regression::RegressionOptions;
 use calibench::calib::tracker_frame::Registration;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::dataset::{Dataset, Split, random_train_val};
 use calibench::eval::Stats;
 use calibench::eval::transfer::{self, TestRegistration};
 use calibench::robot::dh::DhChain;
-use calibench::robot::{Chain, Payload, urdf};
+use calibench::robot::{Chain, urdf};
 
 const MAPPING: &str = include_str!("../mappings/ipa_ur10.toml");
 
@@ -296,18 +295,6 @@ fn a_bad_mapping_or_cell_is_one_clear_line() {
     }
 }
 
-fn ctx<'a>(chain: &'a Chain, dh: &'a DhChain) -> FitContext<'a> {
-    FitContext {
-        chain,
-        dh,
-        payload: Payload {
-            mass: 0.0,
-            com: [0.0; 3],
-        },
-        regression: RegressionOptions::default(),
-    }
-}
-
 /// The README's table "trained on series C, tested on series D": `nominal`, `kinematic` and `elastic` (the best
 /// there), exactly as `real_data` and `calibrate --test-data` compute them; and the margin the README reports.
 #[test]
@@ -323,7 +310,7 @@ fn the_readme_c_to_d_numbers_reproduce() {
     let d = strip(m.read(&series("D"), &chain).unwrap());
     let (train, val) = halves(&c);
     assert_eq!((train.len(), val.len()), (1849, 924));
-    let ctx = ctx(&chain, &dh);
+    let ctx = FitContext::new(&chain, &dh);
     let mut means = Vec::new();
     for (kind, readme_mm) in [
         (MethodKind::Nominal, 0.7207630),
@@ -357,7 +344,7 @@ fn the_probe_orientation_is_modelled() {
     let labels = calibench::dataset::random_split(c.len(), [0.5, 0.25, 0.25], 0).unwrap();
     let pick = |s: Split| c.subset(&(0..c.len()).filter(|&i| labels[i] == s).collect::<Vec<_>>());
     let (train, val, test) = (pick(Split::Train), pick(Split::Val), pick(Split::Test));
-    let ctx = ctx(&chain, &dh);
+    let ctx = FitContext::new(&chain, &dh);
     let mean_angle = |kind: MethodKind| -> f64 {
         let model = method::fit(kind, &ctx, &train, &val).unwrap();
         assert_eq!(

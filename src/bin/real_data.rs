@@ -32,7 +32,7 @@ use calibench::eval::Stats;
 use calibench::eval::transfer::{self, TestRegistration};
 use calibench::rng::{Stream, derive};
 use calibench::robot::dh::DhChain;
-use calibench::robot::{Chain, Payload, urdf};
+use calibench::robot::{Chain, urdf};
 use calibench::{Error, Result, output};
 
 #[derive(Parser, Debug)]
@@ -150,18 +150,6 @@ fn without_inputs(d: &Dataset) -> Dataset {
     d
 }
 
-fn ctx<'a>(chain: &'a Chain, dh: &'a DhChain) -> FitContext<'a> {
-    FitContext {
-        chain,
-        dh,
-        payload: Payload {
-            mass: 0.0,
-            com: [0.0; 3],
-        },
-        regression: RegressionOptions::default(),
-    }
-}
-
 fn split_by(data: &Dataset, labels: &[Split], s: Split) -> Dataset {
     let idx: Vec<usize> = (0..data.len()).filter(|&i| labels[i] == s).collect();
     data.subset(&idx)
@@ -266,7 +254,7 @@ fn run(cli: &Cli) -> Result<()> {
     let mapping = ColumnMapping::load(&cli.mapping)?;
     let series = read_series(&cli.data_dir, &mapping, &chain)?;
     let [b, c, d] = [&series[0], &series[1], &series[2]];
-    let ctx = ctx(&chain, &dh);
+    let ctx = FitContext::new(&chain, &dh);
     let refit = TestRegistration::Refit;
     print_ranges(&series, &chain);
     print_repeats(&series);

@@ -80,7 +80,17 @@ pub struct FitContext<'a> {
     pub regression: RegressionOptions,
 }
 
-impl FitContext<'_> {
+impl<'a> FitContext<'a> {
+    /// A context with no declared payload and the default regression options (the paper's features).
+    pub fn new(chain: &'a Chain, dh: &'a DhChain) -> FitContext<'a> {
+        FitContext {
+            chain,
+            dh,
+            payload: Payload::NONE,
+            regression: RegressionOptions::default(),
+        }
+    }
+
     pub fn limits(&self) -> (Vec<f64>, Vec<f64>) {
         (self.chain.lower_limits(), self.chain.upper_limits())
     }
