@@ -7,6 +7,7 @@
 pub mod calib;
 pub mod campaign;
 pub mod dataset;
+pub mod design;
 pub mod error;
 pub mod eval;
 pub mod measurements;

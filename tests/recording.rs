@@ -63,6 +63,7 @@ fn study(chain: &Chain) -> StudyResult {
                         floor_mean: None,
                         test_orientation: None,
                         truth_orientation: None,
+                        observability: None,
                         fit_ms: 1.0,
                     });
                 }

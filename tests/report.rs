@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use calibench::campaign::DistributionKind;
+use calibench::design::Indices;
 use calibench::eval::Stats;
 use calibench::report::plots::{histograms_png, learning_curves_png};
 use calibench::report::summary::{
@@ -94,6 +95,16 @@ fn study(orientation: bool) -> StudyResult {
                             floor_mean: Some(0.025e-3 * (1.0 + 0.01 * seed as f64)),
                             test_orientation: ori(t * 2.0),
                             truth_orientation: ori(t * 1.5),
+                            // Indices grow with the size, as they do for a campaign.
+                            observability: (m != "nominal").then(|| Indices {
+                                points: n,
+                                params: 31,
+                                rank: 31,
+                                o1: 0.8 + 0.001 * seed as f64,
+                                o2: 1e-3 * (1.0 + n as f64 / 100.0),
+                                o3: 0.123_456_789 * (n as f64).sqrt(),
+                                logdet: 31.0 * (n as f64).ln() - 12.345_678_9,
+                            }),
                             fit_ms: 3.0 + n as f64 * 0.0731 + seed as f64,
                         });
                     }
@@ -217,14 +228,14 @@ fn metrics_header_is_exact() {
         header,
         "scenario,region,distribution,method,n_train,seed,status,test_mean_mm,test_max_mm,test_std_mm,\
          test_rms_mm,test_p95_mm,truth_mean_mm,truth_max_mm,truth_p95_mm,outside_mean_mm,\
-         closed_loop_mean_mm,floor_mean_mm,fit_ms"
+         closed_loop_mean_mm,floor_mean_mm,o1,o2,o3,logdet,fit_ms"
             .split(',')
             .collect::<Vec<_>>()
     );
     assert_eq!(rows.len(), 2 * 3 * 4 * SEEDS as usize);
     let (header, _) = parse_csv(&metrics_csv(&study(true)).unwrap());
     assert_eq!(
-        &header[19..],
+        &header[23..],
         [
             "test_ori_mean_rad",
             "test_ori_max_rad",
@@ -252,6 +263,19 @@ fn metrics_rows_hold_millimetres_and_failures_leave_empty_cells() {
             assert!((mm - t.mean * 1e3).abs() < 1e-6, "{mm} vs {}", t.mean);
             let rad: f64 = row["truth_ori_mean_rad"].parse().unwrap();
             assert!((rad - run.truth_orientation.unwrap().mean).abs() < 1e-9);
+            match run.observability {
+                Some(o) => {
+                    // Seven significant digits, whatever the magnitude.
+                    for (column, v) in [("o1", o.o1), ("o3", o.o3), ("logdet", o.logdet)] {
+                        let written: f64 = row[column].parse().unwrap();
+                        assert!(
+                            (written - v).abs() <= 5e-7 * v.abs(),
+                            "{column}: {written} vs {v}"
+                        );
+                    }
+                }
+                None => assert_eq!(row["o1"], ""),
+            }
         }
     }
     let failed: Vec<_> = rows.iter().filter(|r| r["status"] != "ok").collect();

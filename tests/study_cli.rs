@@ -20,8 +20,8 @@ fn small_study() -> String {
     );
     text = edit(
         &text,
-        r#"distributions = ["uniform", "grid", "sobol", "latin-hypercube"]"#,
-        r#"distributions = ["uniform", "sobol"]"#,
+        r#"distributions = ["uniform", "grid", "sobol", "latin-hypercube", "d-optimal"]"#,
+        r#"distributions = ["uniform", "d-optimal"]"#,
     );
     text = edit(
         &text,
@@ -89,9 +89,19 @@ fn bad_study_inputs_are_one_line_and_write_nothing() {
             "magic",
         ),
         (
-            r#"distributions = ["uniform", "sobol"]"#,
+            r#"distributions = ["uniform", "d-optimal"]"#,
             r#"distributions = ["uniform", "spiral"]"#,
             "spiral",
+        ),
+        (
+            "limit_margin_deg = 2.0",
+            "limit_margin_deg = 2.0\nselection = { model = \"residual-ridge\" }",
+            "selection.model",
+        ),
+        (
+            "limit_margin_deg = 2.0",
+            "limit_margin_deg = 2.0\nselection = { pool_min = 5000, pool_max = 100 }",
+            "pool_max",
         ),
     ];
     for (i, (from, to, needle)) in cases.iter().enumerate() {

@@ -30,13 +30,10 @@
 //! at the reflectors, the quantity the tracker actually measured. A 6-DoF probe's orientation is fitted the same
 //! way with r = [`PROBE_ORIENTATION_LENGTH_M`](super::tracker_frame::PROBE_ORIENTATION_LENGTH_M).
 //!
-//! **Solver.** Levenberg–Marquardt as MINPACK's `lmder` does it (trust region, Gauss–Newton steps whenever
-//! they fit), written here on the k × k normal equations in coordinates whitened by the starting Jacobian
-//! ([`minimize`]) rather than through the `levenberg-marquardt` crate: the crate factors the whole
-//! (3 × points) × k Jacobian by pivoted QR at every iteration, which alone took ~4 ms per iteration at 1168
-//! points (over 200 ms for a fit), and without whitening its diagonal scaling zig-zags along the long valley
-//! that unmodelled elastic errors open in a weakly excited wrist (45 instead of ~10 evaluations). A fit that
-//! does not converge within [`KinematicOptions::max_evaluations`] is an error, never a silent result.
+//! **Solver.** The `levenberg-marquardt` crate (MINPACK's `lmder`) in coordinates whitened by the starting
+//! Jacobian ([`minimize`]), from the linearized (Gauss–Newton) solution: without whitening its diagonal
+//! scaling zig-zags along the long valley that unmodelled elastic errors open in a weakly excited wrist. A fit
+//! that does not converge within [`KinematicOptions::max_evaluations`] is an error, never a silent result.
 //!
 //! **Jacobian.** Analytic and exact at the current estimate: rotation parameters (tracker frame and every e_i4–6)
 //! use SO(3)'s left Jacobian of their current value ([`so3_left_jacobian`]), so the derivative is not the
@@ -955,19 +952,12 @@ fn structural_set(
 ) -> Vec<Param> {
     let mut rng = ChaCha8Rng::seed_from_u64(STRUCT_SEED);
     let n = setup.dh.dof();
-    // Synthetic points that the initial state fits exactly, so the Jacobian is the one at the start.
     let points = (0..STRUCT_SAMPLES)
         .map(|_| {
             let q: Vec<f64> = (0..n)
                 .map(|i| sample_within(lower[i], upper[i], &mut rng))
                 .collect();
-            let flange = setup.dh.flange_pose(&q);
-            Point {
-                y: flange * setup.base.mount,
-                orientation: setup.length.map(|_| flange.rotation),
-                tau: gravity.map_or_else(Vec::new, |g| g.torques(setup.dh, &q)),
-                q,
-            }
+            synthetic_point(setup, gravity, q)
         })
         .collect();
     let structural = Setup {
@@ -978,6 +968,85 @@ fn structural_set(
         params: candidates.to_vec(),
     };
     structural_columns(&structural, candidates)
+}
+
+/// A point that the initial state of `setup` fits exactly, so the Jacobian there is the one at the start.
+fn synthetic_point(setup: &Setup, gravity: Option<&GravityModel>, q: Vec<f64>) -> Point {
+    let flange = setup.dh.flange_pose(&q);
+    Point {
+        y: flange * setup.base.mount,
+        orientation: setup.length.map(|_| flange.rotation),
+        tau: gravity.map_or_else(Vec::new, |g| g.torques(setup.dh, &q)),
+        q,
+    }
+}
+
+/// The identification Jacobian of `kinematic` (or `elastic`) at the nominal model, before anything is
+/// measured: what experiment design ([`crate::design`]) needs. The parameters are the structurally
+/// identifiable set a fit would keep; the rows of a configuration are those its measured point would add
+/// (3, or 6 when orientation is fitted). The tracker frame is taken as the base frame: the columns of a
+/// tracker rotation about another point differ from these by tracker-translation columns, which changes no
+/// observability index that is invariant to such reparametrization (the determinant up to a constant, and
+/// the rank).
+pub struct Identification<'a> {
+    setup: Setup<'a>,
+    gravity: Option<GravityModel>,
+}
+
+impl<'a> Identification<'a> {
+    /// `mount`: the measured point in the flange frame (a nest's centroid); `length`: the weight of rotation
+    /// rows (m/rad, a nest's RMS radius), `None` for a position-only measurement.
+    pub fn new(
+        elastic: bool,
+        ctx: &FitContext<'a>,
+        mount: Point3<f64>,
+        length: Option<f64>,
+    ) -> Result<Identification<'a>> {
+        let n = ctx.dh.dof();
+        let gravity = if elastic {
+            Some(GravityModel::new(ctx.chain, ctx.dh, ctx.payload)?)
+        } else {
+            None
+        };
+        let all = candidates(n, elastic);
+        let (lower, upper) = ctx.limits();
+        let mut setup = Setup {
+            dh: ctx.dh,
+            points: Vec::new(),
+            length,
+            base: State::initial(n, mount),
+            params: all.clone(),
+        };
+        setup.params = structural_set(&setup, &lower, &upper, &all, gravity.as_ref());
+        Ok(Identification { setup, gravity })
+    }
+
+    /// The structurally identifiable parameters: the columns of [`Identification::jacobian`].
+    pub fn params(&self) -> &[Param] {
+        &self.setup.params
+    }
+
+    /// Rows per configuration: 3 for a point, 6 with orientation.
+    pub fn rows_per_point(&self) -> usize {
+        if self.setup.length.is_some() { 6 } else { 3 }
+    }
+
+    /// The Jacobian of the predicted measurement over the configurations `qs`, stacked in their order.
+    pub fn jacobian(&self, qs: &[&[f64]]) -> DMatrix<f64> {
+        let s = &self.setup;
+        let probe = Setup {
+            dh: s.dh,
+            points: qs
+                .iter()
+                .map(|q| synthetic_point(s, self.gravity.as_ref(), q.to_vec()))
+                .collect(),
+            length: s.length,
+            base: s.base.clone(),
+            params: s.params.clone(),
+        };
+        let x0: Vec<f64> = s.params.iter().map(|&p| s.base.get(p)).collect();
+        probe.evaluate(&x0, true).1.expect("jacobian requested")
+    }
 }
 
 impl Fitted for KinematicModel {

@@ -53,24 +53,46 @@ pub enum DistributionKind {
     Grid,
     Sobol,
     LatinHypercube,
+    /// Model-based: the configurations that maximize det(JᵀJ) of the campaign's identification Jacobian for
+    /// the model of `campaign.selection`, chosen from a pool of feasible uniform candidates
+    /// ([`crate::design::select`]). `o1-optimal` is accepted as another name for it: at a fixed number of
+    /// points O1 is a monotone function of the determinant, so the two criteria choose the same design.
+    #[serde(alias = "o1-optimal")]
+    DOptimal,
 }
 
 impl DistributionKind {
     /// Every kind, for sweeps over all layouts.
-    pub const ALL: [DistributionKind; 4] = [
+    pub const ALL: [DistributionKind; 5] = [
+        DistributionKind::Uniform,
+        DistributionKind::Grid,
+        DistributionKind::Sobol,
+        DistributionKind::LatinHypercube,
+        DistributionKind::DOptimal,
+    ];
+
+    /// The layouts that place points in the unit cube without knowing the robot.
+    pub const GEOMETRIC: [DistributionKind; 4] = [
         DistributionKind::Uniform,
         DistributionKind::Grid,
         DistributionKind::Sobol,
         DistributionKind::LatinHypercube,
     ];
 
+    /// The layout in the unit cube: for a model-based kind, that of its candidate pool (uniform).
     pub fn build(self) -> Box<dyn PointDistribution> {
         match self {
-            DistributionKind::Uniform => Box::new(Uniform),
+            DistributionKind::Uniform | DistributionKind::DOptimal => Box::new(Uniform),
             DistributionKind::Grid => Box::new(Grid),
             DistributionKind::Sobol => Box::new(Sobol),
             DistributionKind::LatinHypercube => Box::new(LatinHypercube),
         }
+    }
+
+    /// Whether the campaign chooses its points from a candidate pool by a model (see
+    /// [`crate::campaign::region::SelectionConfig`]).
+    pub fn selects(self) -> bool {
+        self == DistributionKind::DOptimal
     }
 
     /// The same spelling as in scenario files, so reports and inputs agree.
@@ -80,6 +102,7 @@ impl DistributionKind {
             DistributionKind::Grid => "grid",
             DistributionKind::Sobol => "sobol",
             DistributionKind::LatinHypercube => "latin-hypercube",
+            DistributionKind::DOptimal => "d-optimal",
         }
     }
 }
@@ -227,7 +250,7 @@ mod tests {
 
     #[test]
     fn all_points_inside_unit_cube_with_expected_counts() {
-        for kind in DistributionKind::ALL {
+        for kind in DistributionKind::GEOMETRIC {
             let d = kind.build();
             for n in [0, 1, 2, 7, 100, 1000] {
                 for extent in EXTENTS {
@@ -360,7 +383,7 @@ mod tests {
 
     #[test]
     fn deterministic_per_seed() {
-        for kind in DistributionKind::ALL {
+        for kind in DistributionKind::GEOMETRIC {
             let d = kind.build();
             let a = d.sample(200, [0.5, 0.4, 0.3], &mut rng(42));
             let b = d.sample(200, [0.5, 0.4, 0.3], &mut rng(42));
@@ -376,8 +399,12 @@ mod tests {
 
     #[test]
     fn names_match_scenario_spelling() {
-        for kind in DistributionKind::ALL {
+        for kind in DistributionKind::GEOMETRIC {
             assert_eq!(kind.build().name(), kind.name());
+        }
+        let alias: DistributionKind = serde_json::from_str("\"o1-optimal\"").unwrap();
+        assert_eq!(alias, DistributionKind::DOptimal);
+        for kind in DistributionKind::ALL {
             let json = serde_json::to_string(&kind).unwrap();
             assert_eq!(json, format!("\"{}\"", kind.name()));
             let back: DistributionKind = serde_json::from_str(&json).unwrap();

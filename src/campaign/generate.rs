@@ -183,7 +183,12 @@ impl Setup<'_> {
     ) -> Result<(Vec<CampaignPoint>, Rejections)> {
         let anchor = self.anchor(region)?;
         let want = region.points;
-        let mut candidates = want;
+        let selects = region.distribution.selects();
+        let mut candidates = if selects {
+            self.config.selection.pool(want)
+        } else {
+            want
+        };
         let mut last = Rejections::default();
         for attempt in 0..MAX_ATTEMPTS {
             let layout = region.distribution.build();
@@ -195,6 +200,11 @@ impl Setup<'_> {
             let (mut accepted, counts) =
                 self.candidates(r, attempt, region, &anchor, &unit, collision)?;
             last = counts;
+            if accepted.len() >= want && selects {
+                let kept = self.select(region, accepted, want)?;
+                last.used = kept.len();
+                return Ok((kept, last));
+            }
             if accepted.len() >= want {
                 let k = accepted.len();
                 // Thin evenly in layout order, so a grid stays a grid and a low-discrepancy set stays spread.
@@ -212,7 +222,8 @@ impl Setup<'_> {
             if accepted.is_empty() && unit.len() >= 4 * want {
                 break;
             }
-            let next = (want as f64 / rate.max(0.02) * 1.25).ceil() as usize;
+            let goal = if selects { candidates } else { want };
+            let next = (goal as f64 / rate.max(0.02) * 1.25).ceil() as usize;
             candidates = next.max(2 * unit.len()).min(MAX_CANDIDATE_FACTOR * want);
             if unit.len() >= MAX_CANDIDATE_FACTOR * want {
                 break;
@@ -231,6 +242,52 @@ impl Setup<'_> {
             last.candidates,
             last.describe()
         )))
+    }
+
+    /// The `want` feasible points of `pool` that a model-based layout chooses, in pool order.
+    fn select(
+        &self,
+        region: &RegionConfig,
+        pool: Vec<CampaignPoint>,
+        want: usize,
+    ) -> Result<Vec<CampaignPoint>> {
+        use crate::calib::method::{FitContext, MethodKind};
+        use crate::design::{DesignModel, SelectOptions, d_optimal};
+        let selection = &self.config.selection;
+        let in_region = |e: Error| {
+            Error::Unreachable(format!(
+                "region '{}': {}",
+                region.name,
+                e.to_string().replace("invalid input: ", "")
+            ))
+        };
+        let dh = crate::robot::dh::DhChain::from_chain(self.nominal)?;
+        let ctx = FitContext {
+            payload: self.robot.payload,
+            ..FitContext::new(self.nominal, &dh)
+        };
+        let model = DesignModel::for_method(
+            MethodKind::parse(&selection.model)?,
+            &ctx,
+            &self.mounting.nominal,
+        )?
+        .ok_or_else(|| {
+            Error::Invalid(format!(
+                "campaign.selection.model = '{}' has no parameters to design for",
+                selection.model
+            ))
+        })?;
+        let rows: Vec<nalgebra::DMatrix<f64>> = pool
+            .iter()
+            .map(|p| model.jacobian(&[p.q_cmd.as_slice()]))
+            .collect();
+        let options = SelectOptions {
+            max_exchanges: selection.max_exchanges,
+            ..SelectOptions::default()
+        };
+        let chosen = d_optimal(&rows, want, &options).map_err(in_region)?.chosen;
+        let mut pool: Vec<Option<CampaignPoint>> = pool.into_iter().map(Some).collect();
+        Ok(chosen.into_iter().filter_map(|i| pool[i].take()).collect())
     }
 
     fn candidates(
@@ -299,6 +356,12 @@ impl Setup<'_> {
         let collision = CollisionModel::new(self.nominal);
         let anchor = self.anchor(region)?;
         let attempt = GROUND_TRUTH_ATTEMPT + set;
+        // Ground truth is where the arm is used, with the campaign's own redundancy resolution, not a
+        // model-based pool's.
+        let region = &RegionConfig {
+            distribution: super::DistributionKind::Uniform,
+            ..region.clone()
+        };
         let init = || Work {
             ik: IkSolver::new(self.nominal, self.ik_options()),
             frames: Frames::new(self.nominal),
@@ -409,7 +472,14 @@ impl Setup<'_> {
         use rand::Rng;
         let mut rng = derive(self.seed, Stream::Target, &[r, attempt, i]);
         let target = region.target(unit, &mut rng);
-        let spread = self.config.posture_spread_deg.to_radians();
+        let spread = if region.distribution.selects() {
+            self.config
+                .posture_spread_deg
+                .max(self.config.selection.posture_spread_deg)
+        } else {
+            self.config.posture_spread_deg
+        }
+        .to_radians();
         let pull: Vec<f64> = anchor
             .iter()
             .map(|p| {

@@ -119,6 +119,86 @@ pub struct CampaignConfig {
     /// Boxes in the scene the arm must not touch (a table, fixtures), base frame.
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
+    /// How model-based layouts (`d-optimal`) build their candidate pool and choose from it.
+    #[serde(default)]
+    pub selection: SelectionConfig,
+}
+
+/// The candidate pool and the model of a model-based layout. The pool is a uniform layout of
+/// `clamp(pool_factor · N, pool_min, pool_max)` targets for N points, planned and measured like any campaign
+/// point; the feasible ones are the candidates.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SelectionConfig {
+    /// The method whose parameters the points must determine (`kinematic`, `elastic`, or a paper model).
+    pub model: String,
+    pub pool_factor: f64,
+    pub pool_min: usize,
+    pub pool_max: usize,
+    /// Per-candidate random change of the posture target (deg, uniform ±), so that the pool holds several
+    /// redundancy resolutions (the iiwa's elbow) and the selection can use them. Replaces
+    /// `posture_spread_deg` for the pool when larger.
+    pub posture_spread_deg: f64,
+    /// Exchange steps of the DETMAX phase at most; absent: twice the number of points.
+    pub max_exchanges: Option<usize>,
+}
+
+impl Default for SelectionConfig {
+    fn default() -> Self {
+        SelectionConfig {
+            model: "kinematic".into(),
+            pool_factor: 20.0,
+            pool_min: 2000,
+            pool_max: 4000,
+            posture_spread_deg: 20.0,
+            max_exchanges: None,
+        }
+    }
+}
+
+impl SelectionConfig {
+    /// Pool targets for a campaign of `n` points (never fewer than `n`).
+    pub fn pool(&self, n: usize) -> usize {
+        ((self.pool_factor * n as f64).ceil() as usize)
+            .clamp(self.pool_min, self.pool_max.max(self.pool_min))
+            .max(n)
+    }
+
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        use crate::calib::method::MethodKind;
+        let kind = MethodKind::parse(&self.model).map_err(|e| {
+            format!(
+                "selection.model: {}",
+                e.to_string().replace("invalid input: ", "")
+            )
+        })?;
+        if matches!(kind, MethodKind::Nominal | MethodKind::ResidualRidge) {
+            return Err(format!(
+                "selection.model = '{}' has no robot parameters to determine; use kinematic, elastic or a \
+                 paper model",
+                self.model
+            ));
+        }
+        if !(self.pool_factor.is_finite() && self.pool_factor >= 1.0) {
+            return Err(format!(
+                "selection.pool_factor = {} must be finite and at least 1",
+                self.pool_factor
+            ));
+        }
+        if self.pool_max < self.pool_min || self.pool_min == 0 {
+            return Err(format!(
+                "selection: pool_min = {} must be positive and at most pool_max = {}",
+                self.pool_min, self.pool_max
+            ));
+        }
+        if !(self.posture_spread_deg.is_finite() && self.posture_spread_deg >= 0.0) {
+            return Err(format!(
+                "selection.posture_spread_deg = {} must be finite and non-negative",
+                self.posture_spread_deg
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl CampaignConfig {
@@ -148,6 +228,6 @@ impl CampaignConfig {
                 ));
             }
         }
-        Ok(())
+        self.selection.validate()
     }
 }

@@ -13,7 +13,7 @@ use crate::eval::Stats;
 use crate::study::{RunMetrics, StudyResult};
 
 /// The columns of every `metrics.csv`, in order.
-pub const COLUMNS: [&str; 19] = [
+pub const COLUMNS: [&str; 23] = [
     "scenario",
     "region",
     "distribution",
@@ -32,8 +32,18 @@ pub const COLUMNS: [&str; 19] = [
     "outside_mean_mm",
     "closed_loop_mean_mm",
     "floor_mean_mm",
+    "o1",
+    "o2",
+    "o3",
+    "logdet",
     "fit_ms",
 ];
+
+/// The observability columns (see [`crate::design::observability`]): dimensionless, written with
+/// [`INDEX_DIGITS`] significant digits. `logdet` is empty when the points leave a parameter undetermined
+/// (−∞); O1 to O3 are then 0.
+pub const INDEX_COLUMNS: [&str; 4] = ["o1", "o2", "o3", "logdet"];
+pub const INDEX_DIGITS: usize = 7;
 
 /// Appended when the campaign measures orientation.
 pub const ORIENTATION_COLUMNS: [&str; 4] = [
@@ -79,6 +89,18 @@ pub fn rad(x: f64) -> f64 {
     rounded(x, RAD_DECIMALS)
 }
 
+/// An observability index as written: [`INDEX_DIGITS`] significant digits.
+fn index_text(x: f64) -> String {
+    format!("{x:.prec$e}", prec = INDEX_DIGITS - 1)
+}
+
+/// An observability index as `metrics.csv` holds it.
+pub fn index(x: f64) -> f64 {
+    index_text(x)
+        .parse()
+        .expect("a formatted finite number parses")
+}
+
 /// The numeric cells of a run (every column after `status` but `fit_ms`), in header order, as written to
 /// `metrics.csv`: `None` for an empty cell (a failed run, a view the study did not compute, a non-finite value).
 pub fn cells(run: &RunMetrics, orientation: bool) -> Vec<(&'static str, Option<f64>)> {
@@ -102,6 +124,14 @@ pub fn cells(run: &RunMetrics, orientation: bool) -> Vec<(&'static str, Option<f
         ),
         ("floor_mean_mm", length(run.floor_mean)),
     ];
+    let obs = run.observability.filter(|_| ok);
+    let dimensionless = |x: Option<f64>| x.filter(|v| v.is_finite()).map(index);
+    out.extend([
+        ("o1", dimensionless(obs.map(|o| o.o1))),
+        ("o2", dimensionless(obs.map(|o| o.o2))),
+        ("o3", dimensionless(obs.map(|o| o.o3))),
+        ("logdet", dimensionless(obs.map(|o| o.logdet))),
+    ]);
     if orientation {
         out.extend([
             (
@@ -168,12 +198,16 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
             status(run),
         ];
         for (name, value) in cells(run, study.orientation) {
-            let decimals = if name.ends_with("_rad") {
-                RAD_DECIMALS
-            } else {
-                MM_DECIMALS
+            let text = |v: f64| {
+                if INDEX_COLUMNS.contains(&name) {
+                    index_text(v)
+                } else if name.ends_with("_rad") {
+                    format!("{v:.RAD_DECIMALS$}")
+                } else {
+                    format!("{v:.MM_DECIMALS$}")
+                }
             };
-            record.push(value.map_or(String::new(), |v| format!("{v:.decimals$}")));
+            record.push(value.map_or(String::new(), text));
         }
         let fit = if run.fit_ms.is_finite() {
             format!("{:.1}", run.fit_ms)
@@ -777,6 +811,89 @@ fn verdict(
     }
 }
 
+/// The method whose parameters a method's observability describes, when another listed method has the same
+/// ones (a hybrid and its base): its rows would repeat that method's.
+fn same_model_as(method: &str) -> Option<&'static str> {
+    match method {
+        "hybrid" => Some("elastic"),
+        "hybrid-kinematic" => Some("kinematic"),
+        _ => None,
+    }
+}
+
+/// One cell of the observability table: medians of O1, O3 and logdet over the successful seeds.
+pub fn fmt_observability(
+    study: &StudyResult,
+    region: &str,
+    distribution: DistributionKind,
+    method: &str,
+    n_train: usize,
+) -> String {
+    let median = |column: &str| {
+        cell_spread(study, region, distribution, method, n_train, column).map(|s| s.median)
+    };
+    match (median("o1"), median("o3"), median("logdet")) {
+        (None, None, None) => "—".into(),
+        (o1, o3, logdet) => {
+            let f = |x: Option<f64>, p: fn(f64) -> String| x.map_or("—".to_string(), p);
+            format!(
+                "{} · {} · {}",
+                f(o1, |x| format!("{x:.4}")),
+                f(o3, |x| format!("{x:.3e}")),
+                f(logdet, |x| format!("{x:.1}"))
+            )
+        }
+    }
+}
+
+fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
+    let shown: Vec<&String> = a
+        .methods
+        .iter()
+        .filter(|m| {
+            !same_model_as(m).is_some_and(|base| a.methods.iter().any(|x| x == base))
+                && study
+                    .runs
+                    .iter()
+                    .any(|r| &r.key.method == *m && r.observability.is_some())
+        })
+        .collect();
+    if shown.is_empty() {
+        return;
+    }
+    let _ = writeln!(out, "## Observability\n");
+    let _ = writeln!(
+        out,
+        "How well each layout's training points determine each model's parameters: O1 (geometric mean of the \
+         singular values of the identification Jacobian, per point) · O3 (its smallest singular value) · \
+         ln det(JᵀJ) (the D-criterion), medians over the successful seeds; columns scaled to unit RMS over \
+         the joint space, so values compare across layouts and sizes. Higher is better; O3 = 0 means a \
+         parameter combination is not determined. `hybrid` and `hybrid-kinematic` share `elastic`'s and \
+         `kinematic`'s parameters; `nominal` and `residual-ridge` have none. The paper's models are \
+         assessed through their error parameters held constant, the degree-0 part of their regressions.\n"
+    );
+    for region in &a.regions {
+        for m in &shown {
+            let _ = writeln!(out, "### Region `{region}`, `{m}`\n");
+            let layouts: Vec<String> = a
+                .distributions
+                .iter()
+                .map(|d| d.name().to_string())
+                .collect();
+            table_header(out, "n_train", &layouts);
+            for &n in &a.sizes {
+                let row: Vec<String> = a
+                    .distributions
+                    .iter()
+                    .map(|&d| fmt_observability(study, region, d, m, n))
+                    .collect();
+                let _ = writeln!(out, "| {n} | {} |", row.join(" | "));
+            }
+            out.push('\n');
+        }
+    }
+}
+
 /// `summary.md`: the scenario in words, Table 1 (and 2) at the largest training set, learning curves, points
 /// needed and a verdict per method. Every number is an aggregate of `metrics.csv`'s written values.
 pub fn summary_md(study: &StudyResult) -> Result<String> {
@@ -942,6 +1059,8 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
         }
         out.push('\n');
     }
+
+    observability_md(study, &a, &mut out);
 
     let _ = writeln!(out, "## Verdict\n");
     for region in &a.regions {

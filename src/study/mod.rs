@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::campaign::{DistributionKind, RegionConfig};
+use crate::design::Indices;
 use crate::eval::Stats;
 use crate::scenario::Scenario;
 
@@ -80,6 +81,9 @@ pub struct RunMetrics {
     /// Orientation errors (rad) when the campaign measures orientation.
     pub test_orientation: Option<Stats>,
     pub truth_orientation: Option<Stats>,
+    /// Observability indices of the training points for the method's model (`None` for methods without
+    /// robot parameters, and for failed runs).
+    pub observability: Option<Indices>,
     /// Wall time of the fit (ms); the only field that varies between two runs of the same scenario.
     pub fit_ms: f64,
 }

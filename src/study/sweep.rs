@@ -31,6 +31,7 @@ use crate::calib::method::{self, FitContext, Fitted, MethodKind};
 use crate::calib::regression::RegressionOptions;
 use crate::campaign::{Campaign, DistributionKind, RegionConfig, Simulation};
 use crate::dataset::Dataset;
+use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::truth::{
     EvaluationConfig, GroundTruth, ORACLE, TruthSet, closed_loop_errors, setup, test_errors,
@@ -284,6 +285,8 @@ struct Shared<'a> {
     config: &'a StudyConfig,
     sim: &'a Simulation,
     ctx: FitContext<'a>,
+    /// Per method, the model whose observability the run reports.
+    designs: Vec<Option<DesignModel<'a>>>,
     kinds: Vec<MethodKind>,
     detail_method: usize,
     regions: Vec<RegionSets>,
@@ -366,16 +369,22 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         }
     }
     let counter = Counter::new(progress, jobs.len() * kinds.len());
+    let ctx = FitContext {
+        chain: &sim.nominal,
+        dh: &dh,
+        payload: scenario.robot.payload(),
+        regression: RegressionOptions::default(),
+    };
+    let designs = kinds
+        .iter()
+        .map(|&kind| DesignModel::for_method(kind, &ctx, &sim.mounting.nominal))
+        .collect::<Result<Vec<_>>>()?;
     let shared = Shared {
         scenario,
         config,
         sim: &sim,
-        ctx: FitContext {
-            chain: &sim.nominal,
-            dh: &dh,
-            payload: scenario.robot.payload(),
-            regression: RegressionOptions::default(),
-        },
+        ctx,
+        designs,
         kinds,
         detail_method,
         regions,
@@ -449,8 +458,28 @@ impl Shared<'_> {
             floor_mean: None,
             test_orientation: None,
             truth_orientation: None,
+            observability: None,
             fit_ms,
         }
+    }
+
+    /// The observability indices of the training points for every method's design model; a model shared by
+    /// several methods (a hybrid and its base) is computed once.
+    fn observability(&self, train: &Dataset) -> Vec<Option<Indices>> {
+        let qs: Vec<&[f64]> = train.q.iter().map(Vec::as_slice).collect();
+        let mut done: Vec<(MethodKind, Indices)> = Vec::new();
+        self.designs
+            .iter()
+            .map(|design| {
+                let design = design.as_ref()?;
+                if let Some((_, idx)) = done.iter().find(|(m, _)| *m == design.method) {
+                    return Some(*idx);
+                }
+                let idx = Indices::of(&design.jacobian(&qs), qs.len());
+                done.push((design.method, idx));
+                Some(idx)
+            })
+            .collect()
     }
 
     /// Whether this job's campaign may be the one shown point by point.
@@ -489,10 +518,15 @@ impl Shared<'_> {
             })
             .map(|s| s.mean);
         let detail_job = self.is_detail_candidate(job);
+        let observability = self.observability(&train);
         let outcomes: Vec<Outcome> = (0..self.kinds.len())
             .into_par_iter()
             .map(|m| {
-                let outcome = self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
+                let mut outcome =
+                    self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
+                if outcome.metrics.failure.is_none() {
+                    outcome.metrics.observability = observability[m];
+                }
                 self.progress.add(1);
                 outcome
             })
@@ -609,6 +643,7 @@ impl Shared<'_> {
                 floor_mean,
                 test_orientation: Stats::of(&test.orientation),
                 truth_orientation: Stats::of(&grid.orientation),
+                observability: None,
                 fit_ms,
             },
             points,
