@@ -63,6 +63,7 @@ fn study(chain: &Chain) -> StudyResult {
                         floor_mean: None,
                         test_orientation: None,
                         truth_orientation: None,
+                        by_distance: Vec::new(),
                         observability: None,
                         fit_ms: 1.0,
                     });
@@ -137,6 +138,7 @@ fn study(chain: &Chain) -> StudyResult {
         shell_points: 10,
         closed_loop_points: 5,
         detail_method: None,
+        distance_bands_m: vec![0.025, 0.05],
     };
     StudyResult {
         scenario,

@@ -64,6 +64,7 @@ fn study(orientation: bool) -> StudyResult {
         shell_points: 500,
         closed_loop_points: 200,
         detail_method: None,
+        distance_bands_m: vec![0.025, 0.05],
     };
     let mut runs = Vec::new();
     for region in &regions {
@@ -96,6 +97,7 @@ fn study(orientation: bool) -> StudyResult {
                             test_orientation: ori(t * 2.0),
                             truth_orientation: ori(t * 1.5),
                             // Indices grow with the size, as they do for a campaign.
+                            by_distance: Vec::new(),
                             observability: (m != "nominal").then(|| Indices {
                                 points: n,
                                 params: 31,

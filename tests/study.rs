@@ -235,6 +235,11 @@ fn refused(from: &str, to: &str, needles: &[&str]) {
 #[test]
 fn bad_study_sections_are_refused_naming_the_field() {
     refused("sizes = [10, 40]", "sizes = []", &["study.sizes", "empty"]);
+    refused(
+        "seeds = 2",
+        "seeds = 2\ndistance_bands_m = [0.05, 0.025]",
+        &["study.distance_bands_m", "ascending"],
+    );
     refused("sizes = [10, 40]", "sizes = [0, 40]", &["study.sizes"]);
     refused(
         "sizes = [10, 40]",
@@ -294,4 +299,118 @@ fn a_scenario_without_a_study_has_nothing_to_sweep() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("no [study]"), "{e}");
+}
+
+const REGIONS: &str = include_str!("../scenarios/regions.toml");
+
+/// regions.toml cut down: one size, two methods, one seed, small ground-truth sets.
+fn regions_study() -> &'static StudyResult {
+    static R: OnceLock<StudyResult> = OnceLock::new();
+    R.get_or_init(|| {
+        let mut text = edit(REGIONS, "sizes = [30, 125, 500]", "sizes = [60]");
+        text = edit(
+            &text,
+            r#"distributions = ["uniform", "d-optimal"]"#,
+            r#"distributions = ["uniform"]"#,
+        );
+        text = edit(
+            &text,
+            r#"methods = ["nominal", "paper-rotxyz", "kinematic", "elastic", "hybrid"]"#,
+            r#"methods = ["nominal", "elastic"]"#,
+        );
+        text = edit(&text, "seeds = 3", "seeds = 1");
+        text = edit(&text, "grid_points = 1000", "grid_points = 150");
+        text = edit(&text, "shell_points = 200", "shell_points = 60");
+        text = edit(
+            &text,
+            "detail_method = \"hybrid\"",
+            "detail_method = \"elastic\"",
+        );
+        run_on(2, &text)
+    })
+}
+
+#[test]
+fn errors_by_distance_cover_every_ground_truth_point_and_agree_with_the_grid() {
+    let study = regions_study();
+    let region = |name: &str| study.regions.iter().find(|r| r.name == name).unwrap();
+    for run in study.runs.iter().filter(|r| r.failure.is_none()) {
+        let training = region(&run.key.region);
+        for used in &study.regions {
+            let bands: Vec<_> = run
+                .by_distance
+                .iter()
+                .filter(|b| b.use_region == used.name)
+                .collect();
+            assert!(!bands.is_empty(), "{:?} used in {}", run.key, used.name);
+            for b in &bands {
+                assert!(b.points > 0 && b.from_m <= b.to_m && b.mean.is_finite() && b.mean > 0.0);
+            }
+            if used.name == training.name {
+                // Inside the training region lie exactly its grid points: the band's mean is the run's
+                // ground-truth mean, computed the other way.
+                let inside = bands.iter().find(|b| b.to_m == 0.0).unwrap();
+                let truth = run.truth.as_ref().unwrap();
+                assert!((inside.mean - truth.mean).abs() < 1e-12 * truth.mean.max(1.0));
+                // The shell is within its width of the box, at most √3 × 50 mm at a corner.
+                assert!(bands.iter().all(|b| b.from_m < 0.05 * 3f64.sqrt()));
+            }
+        }
+        // The small region's calibration, used in the large one, reaches beyond 200 mm, and `elastic`
+        // (a global model) is still far better there than `nominal`.
+        if run.key.region == "small" {
+            let far = run
+                .by_distance
+                .iter()
+                .find(|b| b.use_region == "large" && b.to_m.is_infinite())
+                .unwrap_or_else(|| panic!("no band beyond 200 mm: {:?}", run.by_distance));
+            assert_eq!(far.from_m, 0.2);
+            let nominal_far = study
+                .runs
+                .iter()
+                .find(|r| r.key.method == "nominal" && r.key.region == "small")
+                .and_then(|r| {
+                    r.by_distance
+                        .iter()
+                        .find(|b| b.use_region == "large" && b.to_m.is_infinite())
+                })
+                .unwrap();
+            if run.key.method == "elastic" {
+                assert!(
+                    far.mean < 0.2 * nominal_far.mean,
+                    "{far:?} vs {nominal_far:?}"
+                );
+            }
+        }
+    }
+    // outside.csv holds these rows, and the summary's table shows their medians.
+    let csv = calibench::report::summary::outside_csv(study).unwrap();
+    let text = String::from_utf8(csv).unwrap();
+    let rows: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        rows[0],
+        "scenario,region,use_region,distribution,method,n_train,seed,from_mm,to_mm,points,outside_mean_mm"
+    );
+    let total: usize = study
+        .runs
+        .iter()
+        .filter(|r| r.failure.is_none())
+        .map(|r| r.by_distance.len())
+        .sum();
+    assert_eq!(rows.len() - 1, total);
+    let far_row = rows
+        .iter()
+        .find(|l| l.contains(",small,large,uniform,elastic,60,0,200,inf,"))
+        .unwrap();
+    let written: f64 = far_row.rsplit(',').next().unwrap().parse().unwrap();
+    let md = calibench::report::summary::summary_md(study).unwrap();
+    let section = &md[md.find("### Trained in `small`, used in `large`").unwrap()..];
+    let line = section
+        .lines()
+        .find(|l| l.starts_with("| beyond 200 mm |"))
+        .unwrap();
+    assert!(
+        line.ends_with(&format!("| {written:.4} |")),
+        "{line} vs {written}"
+    );
 }

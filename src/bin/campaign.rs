@@ -128,6 +128,7 @@ fn run(args: &Args) -> Result<()> {
             }
             let summary = report::summary::summary_md(&study)?;
             files.push(("metrics.csv".into(), report::summary::metrics_csv(&study)?));
+            files.push(("outside.csv".into(), report::summary::outside_csv(&study)?));
             files.extend(report::plots::learning_curves_png(&study)?);
             files.extend(report::plots::histograms_png(&study)?);
             files.push((

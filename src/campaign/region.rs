@@ -69,6 +69,16 @@ impl RegionConfig {
     }
 
     /// A point of the unit cube mapped into the box.
+    /// Distance (m) of `p` (base frame) from the region's box; 0 inside.
+    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+        let c = Vector3::from(self.center_m);
+        let half = Vector3::from(self.size_m) / 2.0;
+        (p.coords - c)
+            .abs()
+            .zip_map(&half, |d, h| (d - h).max(0.0))
+            .norm()
+    }
+
     pub fn point_at(&self, unit: &[f64; 3]) -> Point3<f64> {
         self.min_corner() + Vector3::from(self.size_m).component_mul(&Vector3::from(*unit))
     }
@@ -229,5 +239,31 @@ impl CampaignConfig {
             }
         }
         self.selection.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distance_from_the_box() {
+        let region = RegionConfig {
+            name: "r".into(),
+            center_m: [1.0, 0.0, 0.5],
+            size_m: [0.2, 0.4, 0.6],
+            points: 1,
+            distribution: DistributionKind::Uniform,
+            tool_rpy_deg: [0.0; 3],
+            cone_half_angle_deg: 0.0,
+            spin_deg: 0.0,
+        };
+        // Inside, on a face, beyond a face, beyond an edge (3-4-5) and a corner.
+        assert_eq!(region.distance(&Point3::new(1.05, 0.1, 0.7)), 0.0);
+        assert!(region.distance(&Point3::new(1.1, 0.0, 0.5)) < 1e-15);
+        assert!((region.distance(&Point3::new(1.0, 0.5, 0.5)) - 0.3).abs() < 1e-15);
+        assert!((region.distance(&Point3::new(1.4, -0.6, 0.5)) - 0.5).abs() < 1e-15);
+        let corner = region.distance(&Point3::new(0.8, 0.3, 0.1));
+        assert!((corner - (0.1f64.powi(2) * 2.0 + 0.1f64.powi(2)).sqrt()).abs() < 1e-15);
     }
 }

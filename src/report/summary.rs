@@ -224,6 +224,152 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
     })
 }
 
+/// The columns of `outside.csv`: one row per (run, region of use, band of distance from the training region).
+pub const OUTSIDE_COLUMNS: [&str; 11] = [
+    "scenario",
+    "region",
+    "use_region",
+    "distribution",
+    "method",
+    "n_train",
+    "seed",
+    "from_mm",
+    "to_mm",
+    "points",
+    "outside_mean_mm",
+];
+
+/// A band edge as `outside.csv` writes it: millimetres, `inf` for the open end.
+fn edge_text(m: f64) -> String {
+    if m.is_finite() {
+        format!("{}", rounded(m * 1e3, 3))
+    } else {
+        "inf".into()
+    }
+}
+
+/// `outside.csv`: the ground-truth mean of every successful run by distance from its training region (`region`)
+/// over the ground-truth points (grid and shell) of each region of use; band `from_mm = to_mm = 0` is inside
+/// the training region, the others hold `from_mm < distance ≤ to_mm`.
+pub fn outside_csv(study: &StudyResult) -> Result<Vec<u8>> {
+    let data_error = |e: csv::Error| Error::Data {
+        origin: "outside.csv".into(),
+        message: e.to_string(),
+    };
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(OUTSIDE_COLUMNS).map_err(data_error)?;
+    for run in study.runs.iter().filter(|r| r.failure.is_none()) {
+        let k = &run.key;
+        for b in &run.by_distance {
+            w.write_record([
+                study.scenario.name.clone(),
+                k.region.clone(),
+                b.use_region.clone(),
+                k.distribution.name().to_string(),
+                k.method.clone(),
+                k.n_train.to_string(),
+                k.seed.to_string(),
+                edge_text(b.from_m),
+                edge_text(b.to_m),
+                b.points.to_string(),
+                format!("{:.MM_DECIMALS$}", mm(b.mean)),
+            ])
+            .map_err(data_error)?;
+        }
+    }
+    w.into_inner().map_err(|e| Error::Data {
+        origin: "outside.csv".into(),
+        message: e.to_string(),
+    })
+}
+
+/// A band as the summary names it.
+fn band_label(from_m: f64, to_m: f64) -> String {
+    if to_m == 0.0 {
+        "inside".into()
+    } else if to_m.is_finite() {
+        format!("{}–{} mm", edge_text(from_m), edge_text(to_m))
+    } else {
+        format!("beyond {} mm", edge_text(from_m))
+    }
+}
+
+fn outside_md(study: &StudyResult, a: &Axes, out: &mut String) {
+    let Some(&largest) = a.sizes.last() else {
+        return;
+    };
+    let Some(&layout) = a.distributions.first() else {
+        return;
+    };
+    let ok = |r: &&RunMetrics| {
+        r.failure.is_none() && r.key.n_train == largest && r.key.distribution == layout
+    };
+    if !study
+        .runs
+        .iter()
+        .filter(ok)
+        .any(|r| !r.by_distance.is_empty())
+    {
+        return;
+    }
+    let _ = writeln!(out, "## Accuracy by distance from the training region\n");
+    let _ = writeln!(
+        out,
+        "Ground-truth mean (mm) of the calibration fitted in one region (trained on {largest} points, {} \
+         layout) over the ground-truth points (grid and shell) of each region where it is used, grouped by \
+         the distance of the target from the training region's box; median over the successful seeds. Every \
+         run's rows are in `outside.csv`.\n",
+        layout.name()
+    );
+    let methods: Vec<String> = a.methods.iter().map(|m| format!("`{m}`")).collect();
+    for training in &a.regions {
+        for used in &a.regions {
+            let bands: Vec<(f64, f64)> = {
+                let mut v: Vec<(f64, f64)> = Vec::new();
+                for r in study
+                    .runs
+                    .iter()
+                    .filter(ok)
+                    .filter(|r| &r.key.region == training)
+                {
+                    for b in r.by_distance.iter().filter(|b| &b.use_region == used) {
+                        if !v.contains(&(b.from_m, b.to_m)) {
+                            v.push((b.from_m, b.to_m));
+                        }
+                    }
+                }
+                v.sort_by(|x, y| x.1.total_cmp(&y.1));
+                v
+            };
+            if bands.is_empty() {
+                continue;
+            }
+            let _ = writeln!(out, "### Trained in `{training}`, used in `{used}`\n");
+            table_header(out, "distance", &methods);
+            for (from, to) in bands {
+                let row: Vec<String> = a
+                    .methods
+                    .iter()
+                    .map(|m| {
+                        let values: Vec<f64> = study
+                            .runs
+                            .iter()
+                            .filter(ok)
+                            .filter(|r| &r.key.region == training && &r.key.method == m)
+                            .flat_map(|r| &r.by_distance)
+                            .filter(|b| &b.use_region == used && b.from_m == from && b.to_m == to)
+                            .map(|b| mm(b.mean))
+                            .collect();
+                        spread(&values).map_or("—".into(), |s| fmt_mm(s.median))
+                    })
+                    .collect();
+                let _ = writeln!(out, "| {} | {} |", band_label(from, to), row.join(" | "));
+            }
+            out.push('\n');
+        }
+    }
+}
+
 // ------------------------------------------------------------------------------------------------------------
 // Aggregation
 
@@ -1060,6 +1206,7 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
         out.push('\n');
     }
 
+    outside_md(study, &a, &mut out);
     observability_md(study, &a, &mut out);
 
     let _ = writeln!(out, "## Verdict\n");

@@ -21,6 +21,10 @@ fn default_validation_ratio() -> f64 {
     0.5
 }
 
+fn default_distance_bands() -> Vec<f64> {
+    vec![0.025, 0.05, 0.1, 0.2]
+}
+
 /// The `[study]` section of a scenario.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -50,6 +54,25 @@ pub struct StudyConfig {
     /// The method shown point by point (error arrows, residual grid); the first method when absent.
     #[serde(default)]
     pub detail_method: Option<String>,
+    /// Upper edges (m, ascending) of the bands of distance from the training region by which `outside.csv`
+    /// groups the ground-truth points of every region (grid and shell): inside (0), then (0, b₁], (b₁, b₂],
+    /// …, and beyond the last edge.
+    #[serde(default = "default_distance_bands")]
+    pub distance_bands_m: Vec<f64>,
+}
+
+/// Ground-truth errors of one run in one band of distance from its training region, over the ground-truth
+/// points (grid and shell) of one region where the calibration is used.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct DistanceBand {
+    pub use_region: String,
+    /// Band of distance from the training region's box (m): `from < d ≤ to`; `from = to = 0` is inside,
+    /// `to = ∞` the last band.
+    pub from_m: f64,
+    pub to_m: f64,
+    pub points: usize,
+    /// Mean ground-truth position error (m).
+    pub mean: f64,
 }
 
 /// Which run: the key of a `metrics.csv` row.
@@ -81,6 +104,8 @@ pub struct RunMetrics {
     /// Orientation errors (rad) when the campaign measures orientation.
     pub test_orientation: Option<Stats>,
     pub truth_orientation: Option<Stats>,
+    /// Ground-truth errors by distance from the training region, per region of use (non-empty bands only).
+    pub by_distance: Vec<DistanceBand>,
     /// Observability indices of the training points for the method's model (`None` for methods without
     /// robot parameters, and for failed runs).
     pub observability: Option<Indices>,

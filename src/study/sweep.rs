@@ -25,7 +25,8 @@ use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
 use super::{
-    BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
+    BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
+    StudyResult,
 };
 use crate::calib::method::{self, FitContext, Fitted, MethodKind};
 use crate::calib::regression::RegressionOptions;
@@ -140,6 +141,17 @@ impl StudyConfig {
             ));
         }
         self.ground_truth_config().validate()?;
+        if self
+            .distance_bands_m
+            .iter()
+            .any(|b| !(b.is_finite() && *b > 0.0))
+            || self.distance_bands_m.windows(2).any(|w| w[0] >= w[1])
+        {
+            return Err(format!(
+                "distance_bands_m = {:?} must be positive, finite and ascending",
+                self.distance_bands_m
+            ));
+        }
         for &n in &self.sizes {
             let total = self.campaign_points(n);
             if let Some(r) = regions.iter().find(|r| total > r.points) {
@@ -458,6 +470,7 @@ impl Shared<'_> {
             floor_mean: None,
             test_orientation: None,
             truth_orientation: None,
+            by_distance: Vec::new(),
             observability: None,
             fit_ms,
         }
@@ -623,6 +636,7 @@ impl Shared<'_> {
                 points: None,
             };
         }
+        let by_distance = self.by_distance(job, model.as_ref(), &grid.position, &shell.position);
         let points = detail_job.then(|| PointData {
             test: test.position.clone(),
             campaign: (m == self.detail_method).then(|| {
@@ -643,11 +657,69 @@ impl Shared<'_> {
                 floor_mean,
                 test_orientation: Stats::of(&test.orientation),
                 truth_orientation: Stats::of(&grid.orientation),
+                by_distance,
                 observability: None,
                 fit_ms,
             },
             points,
         }
+    }
+
+    /// Ground-truth errors by distance from the job's training region, over the grid and shell of every
+    /// region: the training region's own (`grid`, `shell`, already computed) and the others', predicted here.
+    fn by_distance(
+        &self,
+        job: Job,
+        model: &dyn Fitted,
+        grid: &[f64],
+        shell: &[f64],
+    ) -> Vec<DistanceBand> {
+        let training = &self.scenario.regions[job.region];
+        let edges = &self.config.distance_bands_m;
+        let mut bands = Vec::new();
+        for (r, region) in self.scenario.regions.iter().enumerate() {
+            let truth = &self.regions[r].truth;
+            let points = truth.grid.points.iter().chain(&truth.shell.points);
+            let errors: Vec<f64> = if r == job.region {
+                grid.iter().chain(shell).copied().collect()
+            } else {
+                let mut e = truth_errors(model, truth, &truth.grid.points).position;
+                e.extend(truth_errors(model, truth, &truth.shell.points).position);
+                e
+            };
+            // Band 0 is inside; band i ≥ 1 is (edge[i-2], edge[i-1]], the last one beyond every edge.
+            let mut sums = vec![(0usize, 0.0f64); edges.len() + 2];
+            for (p, e) in points.zip(&errors) {
+                let d = training.distance(&Point3::from(p.nominal_flange.translation.vector));
+                let band = if d == 0.0 {
+                    0
+                } else {
+                    1 + edges.iter().take_while(|&&b| d > b).count()
+                };
+                sums[band].0 += 1;
+                sums[band].1 += e;
+            }
+            for (band, (count, sum)) in sums.into_iter().enumerate() {
+                if count == 0 {
+                    continue;
+                }
+                let (from_m, to_m) = match band {
+                    0 => (0.0, 0.0),
+                    b => (
+                        if b == 1 { 0.0 } else { edges[b - 2] },
+                        edges.get(b - 1).copied().unwrap_or(f64::INFINITY),
+                    ),
+                };
+                bands.push(DistanceBand {
+                    use_region: region.name.clone(),
+                    from_m,
+                    to_m,
+                    points: count,
+                    mean: sum / count as f64,
+                });
+            }
+        }
+        bands
     }
 
     /// The detail of this job, when its campaign, the nominal model and the detail method all worked.
