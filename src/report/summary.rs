@@ -957,6 +957,72 @@ fn verdict(
     }
 }
 
+/// A method's best accuracy in the study: the lowest plateau (median ground-truth mean at the largest size,
+/// mm) over the layouts, and the target within [`PLATEAU_TOLERANCE`] of it.
+pub fn best_target(curves: &[&Curve]) -> Option<f64> {
+    curves
+        .iter()
+        .filter_map(|c| plateau(&c.points))
+        .min_by(f64::total_cmp)
+        .map(|p| (1.0 + PLATEAU_TOLERANCE) * p)
+}
+
+/// The smallest size of a curve whose median ground-truth mean is at most `target` (mm).
+pub fn points_to(points: &[CurvePoint], target: f64) -> Option<usize> {
+    points
+        .iter()
+        .filter(|p| p.truth.is_some_and(|t| t.median <= target))
+        .map(|p| p.n_train)
+        .min()
+}
+
+/// Which layout gets each method to its best accuracy with the fewest points: the floor above is out of
+/// every method's reach, so this asks for the method's own best plateau instead.
+fn best_accuracy_md(curves: &[Curve], a: &Axes, out: &mut String) {
+    let _ = writeln!(out, "## Points to the best accuracy\n");
+    let _ = writeln!(
+        out,
+        "Per method, the smallest training-set size at which each layout's median ground-truth mean is within \
+         {} % of the method's best plateau over all layouts (the target, mm); **bold**: the layout that needs \
+         the fewest points (ties: all of them); \"never\": not within the sizes studied.\n",
+        PLATEAU_TOLERANCE * 100.0
+    );
+    for region in &a.regions {
+        let _ = writeln!(out, "### Region `{region}`\n");
+        let mut columns = vec!["target (mm)".to_string()];
+        columns.extend(a.distributions.iter().map(|d| d.name().to_string()));
+        table_header(out, "method", &columns);
+        for m in &a.methods {
+            let these: Vec<&Curve> = curves
+                .iter()
+                .filter(|c| &c.region == region && &c.method == m)
+                .collect();
+            let Some(target) = best_target(&these) else {
+                continue;
+            };
+            let needed: Vec<Option<usize>> = a
+                .distributions
+                .iter()
+                .map(|&d| {
+                    these
+                        .iter()
+                        .find(|c| c.distribution == d)
+                        .and_then(|c| points_to(&c.points, target))
+                })
+                .collect();
+            let fewest = needed.iter().flatten().min().copied();
+            let mut row = vec![fmt_mm(target)];
+            row.extend(needed.iter().map(|n| match n {
+                Some(n) if Some(*n) == fewest => format!("**{n}**"),
+                Some(n) => n.to_string(),
+                None => "never".into(),
+            }));
+            let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
+        }
+        out.push('\n');
+    }
+}
+
 /// The method whose parameters a method's observability describes, when another listed method has the same
 /// ones (a hybrid and its base): its rows would repeat that method's.
 fn same_model_as(method: &str) -> Option<&'static str> {
@@ -1208,6 +1274,8 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
 
     outside_md(study, &a, &mut out);
     observability_md(study, &a, &mut out);
+
+    best_accuracy_md(&curves, &a, &mut out);
 
     let _ = writeln!(out, "## Verdict\n");
     for region in &a.regions {
