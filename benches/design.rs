@@ -6,7 +6,7 @@
 use std::time::{Duration, Instant};
 
 use calibench::calib::method::{FitContext, MethodKind};
-use calibench::campaign::{DistributionKind, RegionConfig, Setup, simulate};
+use calibench::campaign::{DistributionKind, RegionConfig, simulate};
 use calibench::design::{DesignModel, SelectOptions, d_optimal};
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;
@@ -84,15 +84,7 @@ fn main() {
         distribution: DistributionKind::DOptimal,
         ..scenario.regions[0].clone()
     };
-    let setup = Setup {
-        nominal: &sim.nominal,
-        robot: &sim.robot,
-        tracker: &sim.tracker,
-        mounting: &sim.mounting,
-        config: &scenario.campaign,
-        deflection: scenario.truth.deflection,
-        seed: scenario.seed,
-    };
+    let setup = calibench::eval::truth::setup(&scenario, &sim);
     let runs: Vec<Duration> = (0..5)
         .map(|_| {
             let t = Instant::now();
