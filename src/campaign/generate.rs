@@ -299,18 +299,7 @@ impl Setup<'_> {
         unit: &[[f64; 3]],
         collision: &CollisionModel,
     ) -> Result<(Vec<CampaignPoint>, Rejections)> {
-        let init = || Work {
-            ik: IkSolver::new(self.nominal, self.ik_options()),
-            frames: Frames::new(self.nominal),
-            state: TrueState::new(self.robot),
-        };
-        let planned: Vec<std::result::Result<Planned, Reason>> = unit
-            .par_iter()
-            .enumerate()
-            .map_init(init, |work, (i, u)| {
-                self.plan(r, attempt, i as u64, region, anchor, u, collision, work)
-            })
-            .collect();
+        let planned = self.plan_all(r, attempt, region, anchor, unit, collision);
 
         let deflected = self.deflect_planned(&planned)?;
 
@@ -318,11 +307,14 @@ impl Setup<'_> {
             .into_par_iter()
             .zip(deflected.into_par_iter())
             .enumerate()
-            .map_init(init, |work, (i, (plan, q_link))| {
-                let plan = plan?;
-                let q_link = q_link.expect("a planned command always has a deflection");
-                self.measure(r, attempt, i as u64, region, plan, &q_link, collision, work)
-            })
+            .map_init(
+                || self.work(),
+                |work, (i, (plan, q_link))| {
+                    let plan = plan?;
+                    let q_link = q_link.expect("a planned command always has a deflection");
+                    self.measure(r, attempt, i as u64, region, plan, &q_link, collision, work)
+                },
+            )
             .collect();
 
         let mut counts = Rejections {
@@ -362,18 +354,7 @@ impl Setup<'_> {
             distribution: super::DistributionKind::Uniform,
             ..region.clone()
         };
-        let init = || Work {
-            ik: IkSolver::new(self.nominal, self.ik_options()),
-            frames: Frames::new(self.nominal),
-            state: TrueState::new(self.robot),
-        };
-        let planned: Vec<std::result::Result<Planned, Reason>> = unit
-            .par_iter()
-            .enumerate()
-            .map_init(init, |work, (i, u)| {
-                self.plan(r, attempt, i as u64, region, &anchor, u, &collision, work)
-            })
-            .collect();
+        let planned = self.plan_all(r, attempt, region, &anchor, unit, &collision);
         let deflected = self.deflect_planned(&planned)?;
         let mut counts = Rejections {
             candidates: unit.len(),
@@ -410,6 +391,34 @@ impl Setup<'_> {
         counts.feasible = points.len();
         counts.used = points.len();
         Ok((points, counts))
+    }
+
+    /// A per-thread workspace of the planning and measuring steps.
+    fn work(&self) -> Work {
+        Work {
+            ik: IkSolver::new(self.nominal, self.ik_options()),
+            frames: Frames::new(self.nominal),
+            state: TrueState::new(self.robot),
+        }
+    }
+
+    /// [`Setup::plan`] for every layout point, in parallel, in layout order.
+    fn plan_all(
+        &self,
+        r: u64,
+        attempt: u64,
+        region: &RegionConfig,
+        anchor: &[f64],
+        unit: &[[f64; 3]],
+        collision: &CollisionModel,
+    ) -> Vec<std::result::Result<Planned, Reason>> {
+        unit.par_iter()
+            .enumerate()
+            .map_init(
+                || self.work(),
+                |work, (i, u)| self.plan(r, attempt, i as u64, region, anchor, u, collision, work),
+            )
+            .collect()
     }
 
     /// No random restarts: a restart may land on another branch (elbow, wrist flip), and a campaign that
