@@ -14,10 +14,14 @@ use calibench::scenario::Scenario;
 
 fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool) {
     let scenario = Scenario::load(scenario_path).expect("run from the crate root");
-    let sim = calibench::campaign::simulate(&scenario).expect("the scenario simulates");
+    let sim = calibench::app::simulate(&scenario).expect("the scenario simulates");
     let csv = calibench::measurements::measurements_csv(&sim.campaign).expect("csv");
-    let data = Dataset::from_reader(csv.as_slice(), scenario_path, &sim.nominal.joint_names())
-        .expect("reads back");
+    let data = Dataset::from_reader(
+        csv.as_slice(),
+        scenario_path,
+        &sim.world.nominal.joint_names(),
+    )
+    .expect("reads back");
     let labels = random_split(data.len(), [0.5, 0.25, 0.25], 0).expect("split");
     let pick = |s: Split| {
         data.subset(
@@ -27,13 +31,13 @@ fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool) {
         )
     };
     let (train, val) = (pick(Split::Train), pick(Split::Val));
-    let dh = DhChain::from_chain(&sim.nominal).expect("DH");
+    let dh = DhChain::from_chain(&sim.world.nominal).expect("DH");
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("pool");
     let ctx = FitContext {
-        chain: &sim.nominal,
+        chain: &sim.world.nominal,
         dh: &dh,
         payload: scenario.robot.payload(),
         regression: RegressionOptions {

@@ -5,8 +5,10 @@
 
 use std::time::{Duration, Instant};
 
+use calibench::app::simulate;
 use calibench::calib::method::{FitContext, MethodKind};
-use calibench::campaign::{DistributionKind, RegionConfig, simulate};
+use calibench::campaign::{DistributionKind, Generator, RegionConfig};
+use calibench::design::DOptimal;
 use calibench::design::{DesignModel, SelectOptions, d_optimal};
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;
@@ -19,10 +21,10 @@ fn median(mut runs: Vec<Duration>) -> f64 {
 fn main() {
     let scenario = Scenario::load("scenarios/paper_iiwa.toml").expect("run from the crate root");
     let sim = simulate(&scenario).expect("the scenario simulates");
-    let dh = DhChain::from_chain(&sim.nominal).expect("DH");
+    let dh = DhChain::from_chain(&sim.world.nominal).expect("DH");
     let ctx = FitContext {
         payload: scenario.robot.payload(),
-        ..FitContext::new(&sim.nominal, &dh)
+        ..FitContext::new(&sim.world.nominal, &dh)
     };
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -36,7 +38,7 @@ fn main() {
         .map(|p| p.q_cmd.as_slice())
         .collect();
     for kind in [MethodKind::Kinematic, MethodKind::Elastic] {
-        let model = DesignModel::for_method(kind, &ctx, &sim.mounting.nominal)
+        let model = DesignModel::for_method(kind, &ctx, &sim.world.mounting.nominal)
             .expect("model")
             .expect("has parameters");
         let rows: Vec<_> = pool.iter().map(|q| model.jacobian(&[*q])).collect();
@@ -84,12 +86,25 @@ fn main() {
         distribution: DistributionKind::DOptimal,
         ..scenario.regions[0].clone()
     };
-    let setup = calibench::eval::truth::setup(&scenario, &sim);
     let runs: Vec<Duration> = (0..5)
         .map(|_| {
             let t = Instant::now();
+            // The selector is built inside the timing, as a campaign that needs it builds it.
+            let ctx = calibench::eval::truth::fit_context(&sim.world);
+            let selector = DOptimal::for_selection(
+                &scenario.campaign.selection,
+                &ctx,
+                &sim.world.mounting.nominal,
+            )
+            .expect("selector");
+            let generator = Generator {
+                world: &sim.world,
+                config: &scenario.campaign,
+                seed: sim.world.seed(),
+                selector: Some(&selector),
+            };
             single
-                .install(|| setup.run(std::slice::from_ref(&region)))
+                .install(|| generator.run(std::slice::from_ref(&region)))
                 .expect("campaign");
             t.elapsed()
         })

@@ -12,7 +12,7 @@ use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use calibench::campaign::Setup;
+use calibench::campaign::Generator;
 use calibench::scenario::Scenario;
 use calibench::truth::TrueState;
 use calibench::truth::physics::SettleOptions;
@@ -24,9 +24,13 @@ fn median(mut v: Vec<Duration>) -> Duration {
 
 fn main() {
     let scenario = Scenario::load("scenarios/paper_iiwa.toml").expect("run from the crate root");
-    let sim = calibench::campaign::simulate(&scenario).expect("the paper scenario simulates");
-    let (nominal, robot, tracker, mounting) =
-        (&sim.nominal, &sim.robot, &sim.tracker, &sim.mounting);
+    let sim = calibench::app::simulate(&scenario).expect("the paper scenario simulates");
+    let (nominal, robot, tracker, mounting) = (
+        &sim.world.nominal,
+        &sim.world.robot,
+        &sim.world.tracker,
+        &sim.world.mounting,
+    );
 
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let commands: Vec<Vec<f64>> = (0..20_000)
@@ -90,14 +94,11 @@ fn main() {
     );
 
     // The paper campaign, as the binary generates it (without writing files).
-    let setup = Setup {
-        nominal,
-        robot,
-        tracker,
-        mounting,
+    let setup = Generator {
+        world: &sim.world,
         config: &scenario.campaign,
-        deflection: scenario.truth.deflection,
-        seed: scenario.seed,
+        seed: sim.world.seed(),
+        selector: None,
     };
     for threads in [rayon::current_num_threads(), 1] {
         let pool = rayon::ThreadPoolBuilder::new()

@@ -33,6 +33,16 @@ pub enum Error {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
+    /// The message for a caller that wraps it in its own context (a field, a region): without the prefix of
+    /// an invalid argument or an unreachable target, which the context replaces; every other kind keeps its
+    /// own words (a file's error names the file).
+    pub fn detail(&self) -> String {
+        match self {
+            Error::Invalid(message) | Error::Unreachable(message) => message.clone(),
+            other => other.to_string(),
+        }
+    }
+
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),

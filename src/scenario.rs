@@ -1,19 +1,25 @@
 //! Scenario files (TOML): everything a campaign is made of, each section owned by the stage that uses it.
 //! Every field is documented in `scenarios/README.md`; unknown keys are refused, so a typo is an error, not
 //! a silently ignored setting.
+//!
+//! This module only reads and checks the file: each section's type belongs to its stage, and no stage reads
+//! a scenario. [`crate::app`] builds the world from it and hands each stage its own section.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::calib::method::MethodKind;
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::eval::EvaluationConfig;
-use crate::robot::{Chain, Payload, urdf};
+use crate::robot::{Chain, urdf};
 use crate::study::StudyConfig;
 use crate::tracker::TrackerConfig;
 use crate::tracker::reflector::ReflectorConfig;
 use crate::truth::ErrorModel;
+pub use crate::world::RobotConfig;
+use crate::world::WorldConfig;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -37,31 +43,6 @@ pub struct Scenario {
     /// Where the scenario came from (its path), for messages; not part of the file.
     #[serde(skip)]
     pub origin: String,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct RobotConfig {
-    /// URDF path, relative to the working directory (or, failing that, to the scenario file's directory).
-    pub urdf: PathBuf,
-    /// Link that carries the reflectors; defaults to the chain's last link.
-    #[serde(default)]
-    pub flange_link: Option<String>,
-    /// Mass carried on the flange (kg): the reflector nest, a tool.
-    #[serde(default)]
-    pub payload_kg: f64,
-    /// Its centre of mass in the flange frame (m).
-    #[serde(default)]
-    pub payload_com_m: [f64; 3],
-}
-
-impl RobotConfig {
-    pub fn payload(&self) -> Payload {
-        Payload {
-            mass: self.payload_kg,
-            com: self.payload_com_m,
-        }
-    }
 }
 
 impl Scenario {
@@ -148,6 +129,7 @@ impl Scenario {
             .map_err(|m| format!("reflectors: {m}"))?;
         self.campaign
             .validate()
+            .and_then(|()| selection_model(&self.campaign.selection.model))
             .map_err(|m| format!("campaign: {m}"))?;
         if let Some(evaluation) = &self.evaluation {
             evaluation
@@ -162,6 +144,18 @@ impl Scenario {
         Ok(())
     }
 
+    /// The parts of the scenario that make its world.
+    pub fn world_config(&self) -> WorldConfig {
+        WorldConfig {
+            name: self.name.clone(),
+            seed: self.seed,
+            robot: self.robot.clone(),
+            truth: self.truth.clone(),
+            tracker: self.tracker.clone(),
+            reflectors: self.reflectors.clone(),
+        }
+    }
+
     /// Loads the scenario's robot and checks the fields that depend on it (joint counts).
     pub fn load_robot(&self) -> Result<Chain> {
         let chain = urdf::load_file(&self.robot.urdf, self.robot.flange_link.as_deref())?;
@@ -171,7 +165,7 @@ impl Scenario {
         };
         self.truth
             .validate(chain.dof())
-            .map_err(|e| scenario_err(e.to_string().replace("invalid input: ", "")))?;
+            .map_err(|e| scenario_err(e.detail()))?;
         if self.campaign.posture_deg.len() != chain.dof() {
             return Err(scenario_err(format!(
                 "campaign.posture_deg has {} values, the robot has {} joints",
@@ -181,6 +175,18 @@ impl Scenario {
         }
         Ok(chain)
     }
+}
+
+/// A model-based layout's `selection.model` must name a method with robot parameters to determine.
+fn selection_model(name: &str) -> std::result::Result<(), String> {
+    let kind = MethodKind::parse(name).map_err(|e| format!("selection.model: {}", e.detail()))?;
+    if matches!(kind, MethodKind::Nominal | MethodKind::ResidualRidge) {
+        return Err(format!(
+            "selection.model = '{name}' has no robot parameters to determine; use kinematic, elastic or a \
+             paper model"
+        ));
+    }
+    Ok(())
 }
 
 fn resolve(path: &Path, scenario_dir: Option<&Path>) -> PathBuf {

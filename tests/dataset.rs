@@ -4,7 +4,8 @@
 
 use std::sync::OnceLock;
 
-use calibench::campaign::{Campaign, simulate};
+use calibench::app::simulate;
+use calibench::campaign::Campaign;
 use calibench::dataset::{Dataset, Split, Truth, random_split};
 use calibench::measurements::{measurements_csv, truth_csv};
 use calibench::scenario::Scenario;

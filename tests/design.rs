@@ -5,14 +5,15 @@
 mod common;
 use common::edit;
 
+use calibench::app::run_study;
+use calibench::app::simulate;
 use calibench::calib::method::{FitContext, MethodKind};
-use calibench::campaign::simulate;
 use calibench::design::{DesignModel, Indices, SelectOptions, d_optimal};
 use calibench::robot::Chain;
 use calibench::robot::dh::DhChain;
 use calibench::robot::urdf;
 use calibench::scenario::Scenario;
-use calibench::study::sweep::{Progress, run_study};
+use calibench::study::sweep::Progress;
 use nalgebra::{DMatrix, Point3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -151,9 +152,9 @@ fn d_optimal_campaigns_are_deterministic_and_better_conditioned_than_uniform() {
     assert_eq!(used.used, 40);
     assert!(used.feasible >= 1000, "the pool: {used:?}");
 
-    let dh = DhChain::from_chain(&a.nominal).unwrap();
-    let ctx = FitContext::new(&a.nominal, &dh);
-    let model = DesignModel::for_method(MethodKind::Kinematic, &ctx, &a.mounting.nominal)
+    let dh = DhChain::from_chain(&a.world.nominal).unwrap();
+    let ctx = FitContext::new(&a.world.nominal, &dh);
+    let model = DesignModel::for_method(MethodKind::Kinematic, &ctx, &a.world.mounting.nominal)
         .unwrap()
         .unwrap();
     let indices = |s: &calibench::campaign::Simulation| {

@@ -9,9 +9,10 @@ use std::path::Path;
 use std::process::Command;
 use std::sync::OnceLock;
 
+use calibench::app::simulate;
 use calibench::calib::method::{self, FitContext, Fitted, MethodKind};
 use calibench::calib::regression::RegressionOptions;
-use calibench::campaign::{Simulation, simulate};
+use calibench::campaign::Simulation;
 use calibench::eval::truth::{
     EvaluationConfig, GroundTruth, closed_loop_errors, split_campaign, test_errors, truth_errors,
 };
@@ -62,7 +63,13 @@ fn pose() -> &'static Fixture {
 fn fixture(text: &str) -> Fixture {
     let scenario = Scenario::parse(text, "test scenario").unwrap();
     let sim = simulate(&scenario).unwrap();
-    let truth = GroundTruth::build(&scenario, &sim, &small_config()).unwrap();
+    let truth = GroundTruth::build(
+        &sim.world,
+        &scenario.campaign,
+        &scenario.regions,
+        &small_config(),
+    )
+    .unwrap();
     assert!(truth.grid.points.len() > 100, "{}", truth.grid.points.len());
     assert!(!truth.shell.points.is_empty());
     assert!(truth.closed_loop.points.len() > 20);
@@ -78,7 +85,7 @@ fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
     let f = paper();
     let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
     assert!(test.len() >= 250, "{}", test.len());
-    let oracle = Oracle::new(&f.sim).unwrap();
+    let oracle = Oracle::new(&f.sim.world).unwrap();
     let errors = test_errors(&oracle, &test).unwrap();
     let measured = errors.position.iter().sum::<f64>() / errors.position.len() as f64;
     // Per-axis σ from the noise model at each true point; an isotropic 3-D normal of per-axis σ has mean
@@ -86,7 +93,7 @@ fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
     let expected = test
         .q
         .iter()
-        .map(|q| f.sim.tracker.noise_at(&oracle.predict(q).position))
+        .map(|q| f.sim.world.tracker.noise_at(&oracle.predict(q).position))
         .sum::<f64>()
         / test.len() as f64
         * (8.0 / std::f64::consts::PI).sqrt();
@@ -107,9 +114,9 @@ fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
 fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
     let f = paper();
     let (train, val, _) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
-    let dh = DhChain::from_chain(&f.sim.nominal).unwrap();
+    let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
-        chain: &f.sim.nominal,
+        chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
@@ -121,13 +128,13 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
 
     // Independently: the true arm at each command, its true reflector seen by a perfect tracker, registered
     // into the base frame as the calibrate command does with truth.csv, against the nominal model.
-    let mut state = TrueState::new(&f.sim.robot);
-    let local = centre(&f.sim.mounting.actual);
+    let mut state = TrueState::new(&f.sim.world.robot);
+    let local = centre(&f.sim.world.mounting.actual);
     let mut worst: f64 = 0.0;
     let mut independent = Vec::new();
     for (p, e) in points.iter().zip(&errors.position) {
-        let world = f.sim.robot.flange_pose(&p.q_cmd, &mut state).unwrap() * local;
-        let in_tracker: Point3<f64> = f.sim.tracker.pose.inverse_transform_point(&world);
+        let world = f.sim.world.robot.flange_pose(&p.q_cmd, &mut state).unwrap() * local;
+        let in_tracker: Point3<f64> = f.sim.world.tracker.pose.inverse_transform_point(&world);
         let observed = model
             .registration()
             .observe_points(std::slice::from_ref(&p.q_cmd), &[vec![in_tracker]])
@@ -151,24 +158,24 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
 #[test]
 fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
     let f = paper();
-    let oracle = Oracle::new(&f.sim).unwrap();
+    let oracle = Oracle::new(&f.sim.world).unwrap();
     let points = &f.truth.closed_loop.points;
-    let e = closed_loop_errors(&oracle, &f.truth, &f.sim.robot, points);
+    let e = closed_loop_errors(&oracle, &f.truth, &f.sim.world.robot, points);
     assert_eq!(e.failed, 0, "{:?}", e.first_failure);
     assert_eq!(e.position.len(), points.len());
     let max = e.position.iter().copied().fold(0.0, f64::max);
     assert!(max <= 1e-6, "oracle closed-loop error {max:.3e} m");
 
     let (train, val, _) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
-    let dh = DhChain::from_chain(&f.sim.nominal).unwrap();
+    let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
-        chain: &f.sim.nominal,
+        chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
     };
     let nominal = method::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
-    let e = closed_loop_errors(nominal.as_ref(), &f.truth, &f.sim.robot, points);
+    let e = closed_loop_errors(nominal.as_ref(), &f.truth, &f.sim.world.robot, points);
     assert_eq!(e.failed, 0, "{:?}", e.first_failure);
     let mean = e.position.iter().sum::<f64>() / e.position.len() as f64;
     assert!(mean > 5e-5, "nominal closed-loop error {mean:.3e} m");
@@ -177,7 +184,7 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
 #[test]
 fn with_a_nest_the_oracle_orientation_is_exact_on_the_truth_and_in_closed_loop() {
     let f = pose();
-    let oracle = Oracle::new(&f.sim).unwrap();
+    let oracle = Oracle::new(&f.sim.world).unwrap();
     assert!(oracle.models_orientation());
     let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
     let e = test_errors(&oracle, &test).unwrap();
@@ -194,7 +201,12 @@ fn with_a_nest_the_oracle_orientation_is_exact_on_the_truth_and_in_closed_loop()
     assert!(e.orientation.iter().all(|a| *a <= 1e-9));
     assert!(e.position.iter().all(|d| *d <= 1e-9));
 
-    let e = closed_loop_errors(&oracle, &f.truth, &f.sim.robot, &f.truth.closed_loop.points);
+    let e = closed_loop_errors(
+        &oracle,
+        &f.truth,
+        &f.sim.world.robot,
+        &f.truth.closed_loop.points,
+    );
     assert_eq!(e.failed, 0, "{:?}", e.first_failure);
     assert!(e.position.iter().all(|d| *d <= 1e-6));
     assert!(e.orientation.iter().all(|a| *a <= 1e-6));

@@ -427,12 +427,12 @@ fn paper_campaign(points: usize, seed: u64) -> (Chain, DhChain, Payload, Dataset
         .replacen("seed = 2019", &format!("seed = {seed}"), 1)
         .replacen("points = 2335", &format!("points = {points}"), 1);
     let scenario = Scenario::parse(&text, "paper_iiwa (edited)").unwrap();
-    let sim = calibench::campaign::simulate(&scenario).unwrap();
+    let sim = calibench::app::simulate(&scenario).unwrap();
     let csv = calibench::measurements::measurements_csv(&sim.campaign).unwrap();
     let data =
-        Dataset::from_reader(csv.as_slice(), "campaign", &sim.nominal.joint_names()).unwrap();
-    let dh = DhChain::from_chain(&sim.nominal).unwrap();
-    (sim.nominal, dh, scenario.robot.payload(), data)
+        Dataset::from_reader(csv.as_slice(), "campaign", &sim.world.nominal.joint_names()).unwrap();
+    let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
+    (sim.world.nominal, dh, scenario.robot.payload(), data)
 }
 
 /// The identifiable set is a property of the robot, not of the data: the same names for 5 seeds × 3
@@ -495,12 +495,12 @@ fn a_nest_campaign_fits_the_orientation() {
     let text = std::fs::read_to_string("scenarios/paper_iiwa_pose.toml").unwrap();
     let text = text.replacen("points = 875", "points = 500", 1);
     let scenario = Scenario::parse(&text, "paper_iiwa_pose (edited)").unwrap();
-    let sim = calibench::campaign::simulate(&scenario).unwrap();
+    let sim = calibench::app::simulate(&scenario).unwrap();
     let csv = calibench::measurements::measurements_csv(&sim.campaign).unwrap();
     let data =
-        Dataset::from_reader(csv.as_slice(), "campaign", &sim.nominal.joint_names()).unwrap();
-    let dh = DhChain::from_chain(&sim.nominal).unwrap();
-    let ctx = context(&sim.nominal, &dh, scenario.robot.payload());
+        Dataset::from_reader(csv.as_slice(), "campaign", &sim.world.nominal.joint_names()).unwrap();
+    let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
+    let ctx = context(&sim.world.nominal, &dh, scenario.robot.payload());
     let n = data.len();
     let (train, test) = (data.subset(&range(0, 350)), data.subset(&range(350, n)));
     let true_points: Vec<Vec<Point3<f64>>> = sim.campaign.points[350..n]
@@ -566,15 +566,19 @@ fn a_nest_campaign_fits_the_orientation() {
 fn geometric_only_comes_within_ten_percent_of_the_oracle() {
     use calibench::dataset::{Split, random_split};
     let scenario = Scenario::load("scenarios/geometric_only.toml").unwrap();
-    let sim = calibench::campaign::simulate(&scenario).unwrap();
+    let sim = calibench::app::simulate(&scenario).unwrap();
     let csv = calibench::measurements::measurements_csv(&sim.campaign).unwrap();
-    let data =
-        Dataset::from_reader(csv.as_slice(), "geometric_only", &sim.nominal.joint_names()).unwrap();
+    let data = Dataset::from_reader(
+        csv.as_slice(),
+        "geometric_only",
+        &sim.world.nominal.joint_names(),
+    )
+    .unwrap();
     let labels = random_split(data.len(), [0.5, 0.25, 0.25], scenario.seed).unwrap();
     let pick = |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
     let (train, val, test) = (pick(Split::Train), pick(Split::Val), pick(Split::Test));
-    let dh = DhChain::from_chain(&sim.nominal).unwrap();
-    let ctx = context(&sim.nominal, &dh, scenario.robot.payload());
+    let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
+    let ctx = context(&sim.world.nominal, &dh, scenario.robot.payload());
     let model = KinematicModel::fit(false, &ctx, &data.subset(&train), &data.subset(&val)).unwrap();
     let obs = model.registration().observe(&data.subset(&test)).unwrap();
     let fitted = mean(

@@ -2,7 +2,7 @@
 //! the paper's Table 1 and the elastic deflection carries a large share; and the rapier deflection switch
 //! reproduces the fast path's campaign.
 
-use calibench::campaign::simulate;
+use calibench::app::simulate;
 use calibench::eval::{Budget, measured};
 use calibench::scenario::Scenario;
 use calibench::truth::DeflectionSolver;
@@ -23,7 +23,13 @@ fn paper_scenario_has_the_papers_measured_error() {
         .iter()
         .map(|p| p.q_cmd.clone())
         .collect();
-    let budget = Budget::of(&sim.nominal, &sim.robot, &sim.mounting, &commands).unwrap();
+    let budget = Budget::of(
+        &sim.world.nominal,
+        &sim.world.robot,
+        &sim.world.mounting,
+        &commands,
+    )
+    .unwrap();
     let elastic = budget.elastic_only.mean * 1e3;
     assert!(
         elastic >= m.mean / 3.0,

@@ -7,9 +7,10 @@ use common::edit;
 
 use std::sync::OnceLock;
 
+use calibench::app::run_study;
 use calibench::campaign::DistributionKind;
 use calibench::scenario::Scenario;
-use calibench::study::sweep::{Progress, run_study};
+use calibench::study::sweep::Progress;
 use calibench::study::{RunMetrics, StudyResult};
 
 const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");

@@ -5,16 +5,13 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::Parser;
-use serde_json::json;
 
-use calibench::eval::{Budget, Stats};
+use calibench::app::campaign::{self, Options, Outcome};
+use calibench::eval::Stats;
 use calibench::scenario::Scenario;
-use calibench::study::sweep::{Progress, run_study};
-use calibench::tracker::Tracker;
-use calibench::{Error, Result, campaign, eval, measurements, output, report};
+use calibench::{Error, Result};
 
 /// The scenario run when none is given: the study a user should run first.
 const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
@@ -65,88 +62,22 @@ fn run(args: &Args) -> Result<()> {
         Some(path) => Scenario::load(path)?,
         None => Scenario::parse(DEFAULT_SCENARIO, "embedded default.toml")?,
     };
-    let started = Instant::now();
-    let sim = campaign::simulate(&scenario)?;
-    let generated = started.elapsed();
-    let (robot, tracker, mounting, campaign) =
-        (&sim.robot, &sim.tracker, &sim.mounting, &sim.campaign);
-
-    let measured = eval::measured(campaign)?;
-    let commands: Vec<Vec<f64>> = campaign.points.iter().map(|p| p.q_cmd.clone()).collect();
-    let budget = Budget::of(&sim.nominal, robot, mounting, &commands)?;
-
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("results").join(&scenario.name));
-    let report = json!({
-        "scenario": scenario,
-        "points": campaign.points.len(),
-        "rejections": campaign.rejections,
-        "truth": {
-            "perturbation": robot.perturbation,
-            "mounting": mounting,
-            "tracker_pose": {
-                "translation_m": tracker_translation(tracker),
-                "rotation_quaternion_wxyz": tracker_quaternion(tracker),
-            },
-        },
-        "measured_mm": measured.scaled(1e3),
-        "error_budget_mm": {
-            "all_systematic": budget.all_systematic.scaled(1e3),
-            "elastic_only": budget.elastic_only.scaled(1e3),
-            "rigid_only": budget.rigid_only.scaled(1e3),
-        },
-    });
-    let json = serde_json::to_vec_pretty(&report)
-        .map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
-    let mut files: Vec<(String, Vec<u8>)> = vec![
-        (
-            "measurements.csv".into(),
-            measurements::measurements_csv(campaign)?,
-        ),
-        ("truth.csv".into(), measurements::truth_csv(campaign)?),
-        ("campaign.json".into(), json),
-    ];
-    let evaluation = match &scenario.evaluation {
-        Some(config) => {
-            let started = Instant::now();
-            let evaluation = eval::evaluate(&scenario, &sim, config)?;
-            let json = serde_json::to_vec_pretty(&evaluation)
-                .map_err(|e| Error::Invalid(format!("evaluation.json: {e}")))?;
-            files.push(("evaluation.json".into(), json));
-            Some((evaluation, started.elapsed()))
-        }
-        None => None,
+    let options = Options {
+        out: args.out.clone(),
+        timings: args.timings,
     };
-    let study = match &scenario.study {
-        Some(_) => {
-            let started = Instant::now();
-            let mut study = run_study(&scenario, Progress::Auto)?;
-            if !args.timings {
-                study.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
-            }
-            let summary = report::summary::summary_md(&study)?;
-            files.push(("metrics.csv".into(), report::summary::metrics_csv(&study)?));
-            files.push(("outside.csv".into(), report::summary::outside_csv(&study)?));
-            files.extend(report::plots::learning_curves_png(&study)?);
-            files.extend(report::plots::histograms_png(&study)?);
-            files.push((
-                "campaign.rrd".into(),
-                report::recording::record(&study, &sim.nominal, &summary)?,
-            ));
-            files.push(("summary.md".into(), summary.into_bytes()));
-            Some((study, started.elapsed()))
-        }
-        None => None,
-    };
-    output::write_files(&out, &files)?;
+    let done = campaign::run(scenario, &options)?;
+    print(&done);
+    Ok(())
+}
 
+fn print(done: &Outcome) {
+    let campaign = &done.sim.campaign;
     println!(
         "scenario '{}': {} points in {:.2} s",
-        scenario.name,
+        done.scenario.name,
         campaign.points.len(),
-        generated.as_secs_f64()
+        done.generated.as_secs_f64()
     );
     for (region, r) in &campaign.rejections {
         println!(
@@ -171,11 +102,11 @@ fn run(args: &Args) -> Result<()> {
         );
     };
     println!("distance errors of the reflector (or nest centre) after rigid registration (mm):");
-    row("measured (paper's Table 1 column)", &measured);
-    row("true, all systematic errors", &budget.all_systematic);
-    row("true, elastic deflection only", &budget.elastic_only);
-    row("true, rigid errors only", &budget.rigid_only);
-    if let Some((evaluation, took)) = &evaluation {
+    row("measured (paper's Table 1 column)", &done.measured);
+    row("true, all systematic errors", &done.budget.all_systematic);
+    row("true, elastic deflection only", &done.budget.elastic_only);
+    row("true, rigid errors only", &done.budget.rigid_only);
+    if let Some((evaluation, took)) = &done.evaluation {
         print!("{}", evaluation.table());
         println!(
             "evaluated {} methods in {:.2} s",
@@ -183,7 +114,7 @@ fn run(args: &Args) -> Result<()> {
             took.as_secs_f64()
         );
     }
-    if let Some((study, took)) = &study {
+    if let Some((study, took)) = &done.study {
         let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
         println!(
             "study: {} runs ({} failed, reasons in metrics.csv) in {:.1} s; see summary.md, plots/ and campaign.rrd \
@@ -193,15 +124,5 @@ fn run(args: &Args) -> Result<()> {
             took.as_secs_f64()
         );
     }
-    println!("wrote {}", out.display());
-    Ok(())
-}
-
-fn tracker_translation(tracker: &Tracker) -> [f64; 3] {
-    tracker.pose.translation.vector.into()
-}
-
-fn tracker_quaternion(tracker: &Tracker) -> [f64; 4] {
-    let q = tracker.pose.rotation.quaternion();
-    [q.w, q.i, q.j, q.k]
+    println!("wrote {}", done.out.display());
 }

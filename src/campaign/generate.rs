@@ -13,14 +13,12 @@ use serde::Serialize;
 use super::region::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
-use crate::robot::Chain;
 use crate::robot::collision::CollisionModel;
 use crate::robot::ik::{IkError, IkOptions, IkSolver};
 use crate::robot::kinematics::{Frames, forward_kinematics};
-use crate::tracker::Tracker;
-use crate::tracker::reflector::Mounting;
 use crate::truth::physics::SettleOptions;
-use crate::truth::{DeflectionSolver, TrueRobot, TrueState};
+use crate::truth::{DeflectionSolver, TrueState};
+use crate::world::World;
 
 /// The last millimetres of a beam lie inside the reflector's own mount, which must not count as blocking.
 const BEAM_END_CLEARANCE_M: f64 = 0.005;
@@ -28,15 +26,23 @@ const BEAM_END_CLEARANCE_M: f64 = 0.005;
 const MAX_ATTEMPTS: u64 = 5;
 const MAX_CANDIDATE_FACTOR: usize = 50;
 
-/// Everything the campaign needs, built once.
-pub struct Setup<'a> {
-    pub nominal: &'a Chain,
-    pub robot: &'a TrueRobot,
-    pub tracker: &'a Tracker,
-    pub mounting: &'a Mounting,
+/// Generates campaigns in a world: its robots, tracker and mounting, the campaign's own configuration, the seed
+/// its draws derive from (the world's, or one per campaign of a study), and the selector that chooses the points
+/// of a model-based layout.
+pub struct Generator<'a> {
+    pub world: &'a World,
     pub config: &'a CampaignConfig,
-    pub deflection: DeflectionSolver,
     pub seed: u64,
+    /// Chooses the points of a model-based layout (`d-optimal`) from its feasible pool; a campaign with such a
+    /// layout and no selector is refused.
+    pub selector: Option<&'a dyn Selector>,
+}
+
+/// Chooses the points of a model-based layout from a pool of feasible candidates. Experiment design
+/// ([`crate::design`]) implements it for the model being fitted; the campaign only plans and measures the pool.
+pub trait Selector: Sync {
+    /// Indices of `want` of the candidates' commanded joint angles `pool`, in any order.
+    fn choose(&self, pool: &[&[f64]], want: usize) -> Result<Vec<usize>>;
 }
 
 /// One measured point, with what the simulation knows about it.
@@ -62,7 +68,7 @@ pub struct CampaignPoint {
     pub q_true: Vec<f64>,
 }
 
-/// A point of a noise-free ground-truth set ([`Setup::ground_truth`]): where the true arm really is for a
+/// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a
 /// command, in the world frame, with neither repeatability nor tracker noise.
 #[derive(Clone, Debug)]
 pub struct TruePoint {
@@ -154,10 +160,10 @@ struct Work {
     state: TrueState,
 }
 
-impl Setup<'_> {
+impl Generator<'_> {
     /// Generates the campaign over all regions; points are numbered from 0 in region order.
     pub fn run(&self, regions: &[RegionConfig]) -> Result<Campaign> {
-        let collision = CollisionModel::new(self.nominal);
+        let collision = CollisionModel::new(&self.world.nominal);
         let mut points = Vec::new();
         let mut rejections = BTreeMap::new();
         for (r, region) in regions.iter().enumerate() {
@@ -169,7 +175,7 @@ impl Setup<'_> {
             rejections.insert(region.name.clone(), counts);
         }
         Ok(Campaign {
-            joint_names: self.nominal.joint_names(),
+            joint_names: self.world.nominal.joint_names(),
             points,
             rejections,
         })
@@ -251,41 +257,17 @@ impl Setup<'_> {
         pool: Vec<CampaignPoint>,
         want: usize,
     ) -> Result<Vec<CampaignPoint>> {
-        use crate::calib::method::{FitContext, MethodKind};
-        use crate::design::{DesignModel, SelectOptions, d_optimal};
-        let selection = &self.config.selection;
-        let in_region = |e: Error| {
-            Error::Unreachable(format!(
-                "region '{}': {}",
-                region.name,
-                e.to_string().replace("invalid input: ", "")
-            ))
-        };
-        let dh = crate::robot::dh::DhChain::from_chain(self.nominal)?;
-        let ctx = FitContext {
-            payload: self.robot.payload,
-            ..FitContext::new(self.nominal, &dh)
-        };
-        let model = DesignModel::for_method(
-            MethodKind::parse(&selection.model)?,
-            &ctx,
-            &self.mounting.nominal,
-        )?
-        .ok_or_else(|| {
+        let selector = self.selector.ok_or_else(|| {
             Error::Invalid(format!(
-                "campaign.selection.model = '{}' has no parameters to design for",
-                selection.model
+                "region '{}': layout '{}' chooses its points for a model, and no model was given",
+                region.name,
+                region.distribution.name()
             ))
         })?;
-        let rows: Vec<nalgebra::DMatrix<f64>> = pool
-            .iter()
-            .map(|p| model.jacobian(&[p.q_cmd.as_slice()]))
-            .collect();
-        let options = SelectOptions {
-            max_exchanges: selection.max_exchanges,
-            ..SelectOptions::default()
-        };
-        let chosen = d_optimal(&rows, want, &options).map_err(in_region)?.chosen;
+        let commands: Vec<&[f64]> = pool.iter().map(|p| p.q_cmd.as_slice()).collect();
+        let chosen = selector
+            .choose(&commands, want)
+            .map_err(|e| Error::Unreachable(format!("region '{}': {}", region.name, e.detail())))?;
         let mut pool: Vec<Option<CampaignPoint>> = pool.into_iter().map(Some).collect();
         Ok(chosen.into_iter().filter_map(|i| pool[i].take()).collect())
     }
@@ -345,7 +327,7 @@ impl Setup<'_> {
         region: &RegionConfig,
         unit: &[[f64; 3]],
     ) -> Result<(Vec<TruePoint>, Rejections)> {
-        let collision = CollisionModel::new(self.nominal);
+        let collision = CollisionModel::new(&self.world.nominal);
         let anchor = self.anchor(region)?;
         let attempt = GROUND_TRUTH_ATTEMPT + set;
         // Ground truth is where the arm is used, with the campaign's own redundancy resolution, not a
@@ -361,11 +343,13 @@ impl Setup<'_> {
             ..Rejections::default()
         };
         let mut points = Vec::new();
-        let mut state = TrueState::new(self.robot);
+        let mut state = TrueState::new(&self.world.robot);
         for (plan, q_link) in planned.into_iter().zip(deflected) {
             match (plan, q_link) {
                 (Ok(plan), Some(q_link)) => {
-                    self.robot.reach_with_angles(&q_link, None, &mut state);
+                    self.world
+                        .robot
+                        .reach_with_angles(&q_link, None, &mut state);
                     let true_flange = state.frames.flange;
                     points.push(TruePoint {
                         region: region.name.clone(),
@@ -373,6 +357,7 @@ impl Setup<'_> {
                         nominal_flange: plan.nominal_flange,
                         true_flange,
                         true_reflectors: self
+                            .world
                             .mounting
                             .actual
                             .iter()
@@ -396,13 +381,13 @@ impl Setup<'_> {
     /// A per-thread workspace of the planning and measuring steps.
     fn work(&self) -> Work {
         Work {
-            ik: IkSolver::new(self.nominal, self.ik_options()),
-            frames: Frames::new(self.nominal),
-            state: TrueState::new(self.robot),
+            ik: IkSolver::new(&self.world.nominal, self.ik_options()),
+            frames: Frames::new(&self.world.nominal),
+            state: TrueState::new(&self.world.robot),
         }
     }
 
-    /// [`Setup::plan`] for every layout point, in parallel, in layout order.
+    /// [`Generator::plan`] for every layout point, in parallel, in layout order.
     fn plan_all(
         &self,
         r: u64,
@@ -447,7 +432,7 @@ impl Setup<'_> {
             region.nominal_rotation(),
         );
         let mut solver = IkSolver::new(
-            self.nominal,
+            &self.world.nominal,
             IkOptions {
                 restarts: 0,
                 ..self.ik_options()
@@ -455,7 +440,7 @@ impl Setup<'_> {
         );
         let mut rng = derive(self.seed, Stream::Target, &[u64::MAX]);
         solver
-            .solve(self.nominal, &centre, &Isometry3::identity(), &posture, Some(&posture), &mut rng)
+            .solve(&self.world.nominal, &centre, &Isometry3::identity(), &posture, Some(&posture), &mut rng)
             .map(|s| s.q)
             .map_err(|e| {
                 Error::Unreachable(format!(
@@ -502,7 +487,7 @@ impl Setup<'_> {
         let solution = work
             .ik
             .solve(
-                self.nominal,
+                &self.world.nominal,
                 &target,
                 &Isometry3::identity(),
                 anchor,
@@ -513,7 +498,7 @@ impl Setup<'_> {
                 IkError::NotConverged { .. } => Reason::OutOfReach,
                 IkError::JointLimits => Reason::JointLimits,
             })?;
-        forward_kinematics(self.nominal, &solution.q, &mut work.frames);
+        forward_kinematics(&self.world.nominal, &solution.q, &mut work.frames);
         if collision.self_collision(&work.frames).is_some() {
             return Err(Reason::SelfCollision);
         }
@@ -539,10 +524,10 @@ impl Setup<'_> {
         let unloaded: Vec<Option<Vec<f64>>> = planned
             .par_iter()
             .map_init(
-                || TrueState::new(self.robot),
+                || TrueState::new(&self.world.robot),
                 |state, p| {
                     p.as_ref().ok().map(|p| {
-                        self.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
+                        self.world.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
                         state.q0.clone()
                     })
                 },
@@ -552,23 +537,26 @@ impl Setup<'_> {
     }
 
     fn deflect_all(&self, unloaded: &[Option<Vec<f64>>]) -> Result<Vec<Option<Vec<f64>>>> {
-        match self.deflection {
+        match self.world.deflection() {
             DeflectionSolver::FixedPoint => unloaded
                 .par_iter()
                 .map_init(
-                    || TrueState::new(self.robot),
+                    || TrueState::new(&self.world.robot),
                     |state, q0| {
                         q0.as_ref()
                             .map(|q0| {
                                 state.q0.copy_from_slice(q0);
-                                self.robot.deflect(state).map(|_| state.q.clone())
+                                self.world.robot.deflect(state).map(|_| state.q.clone())
                             })
                             .transpose()
                     },
                 )
                 .collect(),
             DeflectionSolver::Rapier => {
-                let mut physics = self.robot.physics_reference(SettleOptions::default())?;
+                let mut physics = self
+                    .world
+                    .robot
+                    .physics_reference(SettleOptions::default())?;
                 unloaded
                     .iter()
                     .map(|q0| {
@@ -594,19 +582,21 @@ impl Setup<'_> {
         work: &mut Work,
     ) -> std::result::Result<CampaignPoint, Reason> {
         let mut rng = derive(self.seed, Stream::Measurement, &[r, attempt, i]);
-        self.robot
+        self.world
+            .robot
             .reach_with_angles(q_link, Some(&mut rng), &mut work.state);
         let true_flange = work.state.frames.flange;
-        let origin = self.tracker.origin();
-        let facing = true_flange.rotation * self.mounting.facing;
+        let origin = self.world.tracker.origin();
+        let facing = true_flange.rotation * self.world.mounting.facing;
         let true_reflectors: Vec<Point3<f64>> = self
+            .world
             .mounting
             .actual
             .iter()
             .map(|p| true_flange * p)
             .collect();
         for p in &true_reflectors {
-            if !self.tracker.in_acceptance_cone(p, &facing) {
+            if !self.world.tracker.in_acceptance_cone(p, &facing) {
                 return Err(Reason::AcceptanceCone);
             }
             if collision.segment_blocked(&work.state.frames, &origin, p, BEAM_END_CLEARANCE_M) {
@@ -615,12 +605,13 @@ impl Setup<'_> {
         }
         let measured = true_reflectors
             .iter()
-            .map(|p| self.tracker.measure(p, &mut rng))
+            .map(|p| self.world.tracker.measure(p, &mut rng))
             .collect();
         Ok(CampaignPoint {
             id: 0,
             region: region.name.clone(),
             nominal_reflectors: self
+                .world
                 .mounting
                 .nominal
                 .iter()
@@ -632,7 +623,7 @@ impl Setup<'_> {
             true_flange,
             true_in_tracker: true_reflectors
                 .iter()
-                .map(|p| self.tracker.pose.inverse_transform_point(p))
+                .map(|p| self.world.tracker.pose.inverse_transform_point(p))
                 .collect(),
             true_reflectors,
             q_true: work.state.q.clone(),

@@ -174,21 +174,9 @@ impl SelectionConfig {
             .max(n)
     }
 
+    /// Checks the pool; whether `model` names a method with robot parameters is for whoever knows the
+    /// methods to say (the scenario, when it is read).
     pub fn validate(&self) -> std::result::Result<(), String> {
-        use crate::calib::method::MethodKind;
-        let kind = MethodKind::parse(&self.model).map_err(|e| {
-            format!(
-                "selection.model: {}",
-                e.to_string().replace("invalid input: ", "")
-            )
-        })?;
-        if matches!(kind, MethodKind::Nominal | MethodKind::ResidualRidge) {
-            return Err(format!(
-                "selection.model = '{}' has no robot parameters to determine; use kinematic, elastic or a \
-                 paper model",
-                self.model
-            ));
-        }
         if !(self.pool_factor.is_finite() && self.pool_factor >= 1.0) {
             return Err(format!(
                 "selection.pool_factor = {} must be finite and at least 1",

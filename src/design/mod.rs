@@ -5,14 +5,17 @@
 //!   columns scaled to a fixed, campaign-independent unit so that indices compare across campaigns;
 //! - [`observability`]: the indices of a campaign (O1, O2, O3 and the D-criterion) from that Jacobian;
 //! - [`select`]: D-optimal choice of N configurations from a candidate pool, greedy then DETMAX exchange,
-//!   with low-rank determinant updates.
+//!   with low-rank determinant updates;
+//! - [`layout`]: that choice as the selector of a campaign's `d-optimal` layout.
 //!
 //! Everything here works on the nominal model: it is what a user knows before measuring.
 
+pub mod layout;
 pub mod model;
 pub mod observability;
 pub mod select;
 
+pub use layout::DOptimal;
 pub use model::DesignModel;
 pub use observability::Indices;
 pub use select::{SelectOptions, Selection, d_optimal};

@@ -14,12 +14,12 @@ use crate::calib::method::{Fitted, Prediction, SavedModel};
 use crate::calib::paper::PaperModel;
 use crate::calib::registration::{centre, register_points};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
-use crate::campaign::Simulation;
 use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::robot::dh::DhChain;
 use crate::tracker::reflector::Mounting;
 use crate::truth::{TrueRobot, TrueState};
+use crate::world::World;
 
 /// The true robot as a fitted method. Its registered frame is the world frame: `tracker_to_base` is the
 /// tracker's true pose, the mounting is the true measured point (reflector, or nest centre) on the flange.
@@ -34,8 +34,8 @@ pub struct Oracle {
 }
 
 impl Oracle {
-    pub fn new(sim: &Simulation) -> Result<Oracle> {
-        let mounting = &sim.mounting;
+    pub fn new(world: &World) -> Result<Oracle> {
+        let mounting = &world.mounting;
         let nest = (mounting.count() >= 3).then(|| {
             let c = centre(&mounting.nominal);
             mounting
@@ -46,12 +46,12 @@ impl Oracle {
         });
         let nest_rotation = nest_rotation(mounting)?.unwrap_or_else(UnitQuaternion::identity);
         Ok(Oracle {
-            robot: sim.robot.clone(),
-            joint_names: sim.nominal.joint_names(),
-            dh: DhChain::from_chain(&sim.nominal)?,
+            robot: world.robot.clone(),
+            joint_names: world.nominal.joint_names(),
+            dh: world.dh.clone(),
             registration: Registration {
                 frame: TrackerFrame {
-                    tracker_to_base: sim.tracker.pose,
+                    tracker_to_base: world.tracker.pose,
                     mounting: centre(&mounting.actual),
                     rms: 0.0,
                     evaluations: 0,

@@ -25,13 +25,14 @@ use super::stats::Stats;
 use crate::calib::method::{self, FitContext, Fitted, MethodKind};
 use crate::calib::regression::RegressionOptions;
 use crate::campaign::generate::{GROUND_TRUTH_ATTEMPT, TruePoint};
-use crate::campaign::{DistributionKind, RegionConfig, Rejections, Setup, Simulation};
+use crate::campaign::{
+    CampaignConfig, DistributionKind, Generator, RegionConfig, Rejections, Simulation,
+};
 use crate::dataset::{Dataset, Split, random_split};
 use crate::error::{Error, Result};
-use crate::rng::{Stream, derive};
-use crate::robot::dh::DhChain;
-use crate::scenario::Scenario;
+use crate::rng::Stream;
 use crate::truth::{TrueRobot, TrueState};
+use crate::world::World;
 
 /// The name the oracle goes by in a scenario's method list and in reports.
 pub const ORACLE: &str = "oracle";
@@ -105,9 +106,7 @@ impl EvaluationConfig {
     pub fn validate(&self) -> std::result::Result<(), String> {
         for (i, name) in self.methods.iter().enumerate() {
             if name != ORACLE {
-                MethodKind::parse(name).map_err(|e| {
-                    format!("methods: {}", e.to_string().replace("invalid input: ", ""))
-                })?;
+                MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
             }
             if self.methods[..i].contains(name) {
                 return Err(format!("methods: '{name}' is listed twice"));
@@ -177,16 +176,13 @@ pub struct GroundTruth {
     pub closed_loop: TruthSet,
 }
 
-/// The campaign generator of a simulated scenario, for further (ground-truth) sets.
-pub fn setup<'a>(scenario: &'a Scenario, sim: &'a Simulation) -> Setup<'a> {
-    Setup {
-        nominal: &sim.nominal,
-        robot: &sim.robot,
-        tracker: &sim.tracker,
-        mounting: &sim.mounting,
-        config: &scenario.campaign,
-        deflection: scenario.truth.deflection,
-        seed: scenario.seed,
+/// What every method fitted in `world` may know: its nominal robot and the payload the user declares.
+pub fn fit_context(world: &World) -> FitContext<'_> {
+    FitContext {
+        chain: &world.nominal,
+        dh: &world.dh,
+        payload: world.payload(),
+        regression: RegressionOptions::default(),
     }
 }
 
@@ -196,30 +192,32 @@ const SHELL: u64 = 1;
 const CLOSED_LOOP: u64 = 2;
 
 impl GroundTruth {
+    /// The ground truth of `regions` in `world`, with the campaign's posture and obstacles (`campaign`).
     pub fn build(
-        scenario: &Scenario,
-        sim: &Simulation,
+        world: &World,
+        campaign: &CampaignConfig,
+        regions: &[RegionConfig],
         config: &EvaluationConfig,
     ) -> Result<GroundTruth> {
-        let setup = setup(scenario, sim);
-        let layout_rng = |r: u64, set: u64| {
-            derive(
-                scenario.seed,
-                Stream::Layout,
-                &[r, GROUND_TRUTH_ATTEMPT + set],
-            )
+        let generator = Generator {
+            world,
+            config: campaign,
+            seed: world.seed(),
+            selector: None,
         };
+        let layout_rng =
+            |r: u64, set: u64| world.rng(Stream::Layout, &[r, GROUND_TRUTH_ATTEMPT + set]);
         let mut grid = TruthSet::default();
         let mut shell = TruthSet::default();
         let mut closed_loop = TruthSet::default();
-        for (r, region) in scenario.regions.iter().enumerate() {
+        for (r, region) in regions.iter().enumerate() {
             let r = r as u64;
             let unit = DistributionKind::Grid.build().sample(
                 config.grid_points,
                 region.size_m,
                 &mut layout_rng(r, GRID),
             );
-            grid.add(region, setup.ground_truth(r, GRID, region, &unit)?);
+            grid.add(region, generator.ground_truth(r, GRID, region, &unit)?);
 
             if config.shell_points > 0 {
                 let (grown, unit) = shell_layout(
@@ -228,7 +226,7 @@ impl GroundTruth {
                     config.shell_points,
                     &mut layout_rng(r, SHELL),
                 );
-                shell.add(region, setup.ground_truth(r, SHELL, &grown, &unit)?);
+                shell.add(region, generator.ground_truth(r, SHELL, &grown, &unit)?);
             }
 
             if config.closed_loop_points > 0 {
@@ -237,13 +235,16 @@ impl GroundTruth {
                     region.size_m,
                     &mut layout_rng(r, CLOSED_LOOP),
                 );
-                closed_loop.add(region, setup.ground_truth(r, CLOSED_LOOP, region, &unit)?);
+                closed_loop.add(
+                    region,
+                    generator.ground_truth(r, CLOSED_LOOP, region, &unit)?,
+                );
             }
         }
         Ok(GroundTruth {
-            tracker_pose: sim.tracker.pose,
-            measured_point: super::centre(&sim.mounting.actual),
-            nest_rotation: nest_rotation(&sim.mounting)?,
+            tracker_pose: world.tracker.pose,
+            measured_point: super::centre(&world.mounting.actual),
+            nest_rotation: nest_rotation(&world.mounting)?,
             grid,
             shell,
             closed_loop,
@@ -512,7 +513,7 @@ pub fn split_campaign(
     let data = Dataset::from_reader(
         csv.as_slice(),
         "the campaign's measurements",
-        &sim.nominal.joint_names(),
+        &sim.world.nominal.joint_names(),
     )?;
     let labels = random_split(data.len(), fractions, seed)?;
     let pick = |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
@@ -555,38 +556,35 @@ pub fn evaluate_method(
 }
 
 /// Fits every method of `config` on the simulated campaign, adds the oracle, and evaluates them all. A method
-/// that cannot be fitted (or evaluated) is reported as failed, with the reason, and the others go on.
+/// that cannot be fitted (or evaluated) is reported as failed, with the reason, and the others go on. The
+/// ground truth covers `regions` with the campaign's posture and obstacles (`campaign`).
 pub fn evaluate(
-    scenario: &Scenario,
     sim: &Simulation,
+    campaign: &CampaignConfig,
+    regions: &[RegionConfig],
     config: &EvaluationConfig,
 ) -> Result<Evaluation> {
-    let seed = config.split_seed.unwrap_or(scenario.seed);
+    let world = &sim.world;
+    let seed = config.split_seed.unwrap_or(world.seed());
     let (train, val, test) = split_campaign(sim, config.split, seed)?;
-    let truth = GroundTruth::build(scenario, sim, config)?;
-    let dh = DhChain::from_chain(&sim.nominal)?;
-    let ctx = FitContext {
-        chain: &sim.nominal,
-        dh: &dh,
-        payload: scenario.robot.payload(),
-        regression: RegressionOptions::default(),
-    };
+    let truth = GroundTruth::build(world, campaign, regions, config)?;
+    let ctx = fit_context(world);
     let kinds = config.kinds()?;
     let mut methods: Vec<MethodReport> = kinds
         .par_iter()
         .map(|&kind| {
             method::fit(kind, &ctx, &train, &val)
-                .and_then(|model| evaluate_method(model.as_ref(), &test, &truth, &sim.robot))
+                .and_then(|model| evaluate_method(model.as_ref(), &test, &truth, &world.robot))
                 .unwrap_or_else(|e| MethodReport::failed(kind.name(), &e))
         })
         .collect();
-    let oracle = Oracle::new(sim)?.registered_on(&[&train, &val])?;
+    let oracle = Oracle::new(world)?.registered_on(&[&train, &val])?;
     methods.push(
-        evaluate_method(&oracle, &test, &truth, &sim.robot)
+        evaluate_method(&oracle, &test, &truth, &world.robot)
             .unwrap_or_else(|e| MethodReport::failed(ORACLE, &e)),
     );
     Ok(Evaluation {
-        scenario: scenario.name.clone(),
+        scenario: world.config.name.clone(),
         units: "positions in mm, orientations in rad".into(),
         split: SplitReport {
             fractions: config.split,

@@ -4,3 +4,25 @@
 pub mod plots;
 pub mod recording;
 pub mod summary;
+
+use crate::error::Result;
+use crate::robot::Chain;
+use crate::study::StudyResult;
+
+/// Every file of a study's report (name, bytes), in the order they are written: `metrics.csv`, `outside.csv`,
+/// the plots, `campaign.rrd` (the robot drawn from `chain`) and `summary.md`.
+pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Vec<u8>)>> {
+    let summary = summary::summary_md(study)?;
+    let mut files = vec![
+        ("metrics.csv".to_string(), summary::metrics_csv(study)?),
+        ("outside.csv".to_string(), summary::outside_csv(study)?),
+    ];
+    files.extend(plots::learning_curves_png(study)?);
+    files.extend(plots::histograms_png(study)?);
+    files.push((
+        "campaign.rrd".into(),
+        recording::record(study, chain, &summary)?,
+    ));
+    files.push(("summary.md".into(), summary.into_bytes()));
+    Ok(files)
+}

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::campaign::{DistributionKind, RegionConfig};
 use crate::design::Indices;
 use crate::eval::Stats;
-use crate::scenario::Scenario;
+use crate::world::WorldConfig;
 
 pub mod sweep;
 
@@ -162,7 +162,8 @@ pub struct Detail {
 /// Everything the report and the recording need.
 #[derive(Clone, Debug, Serialize)]
 pub struct StudyResult {
-    pub scenario: Scenario,
+    /// The world the study ran in: the scenario's name, seed, robot, true errors, tracker and reflectors.
+    pub scenario: WorldConfig,
     pub config: StudyConfig,
     pub regions: Vec<RegionConfig>,
     /// Every run, in a fixed order (region, distribution, method, size, seed): independent of threads.

@@ -29,19 +29,17 @@ use super::{
     StudyResult,
 };
 use crate::calib::method::{self, FitContext, Fitted, MethodKind};
-use crate::calib::regression::RegressionOptions;
-use crate::campaign::{Campaign, DistributionKind, RegionConfig, Simulation};
+use crate::campaign::{Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig};
 use crate::dataset::Dataset;
-use crate::design::{DesignModel, Indices};
+use crate::design::{DOptimal, DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::truth::{
-    EvaluationConfig, GroundTruth, ORACLE, TruthSet, closed_loop_errors, setup, test_errors,
+    EvaluationConfig, GroundTruth, ORACLE, TruthSet, closed_loop_errors, fit_context, test_errors,
     truth_errors,
 };
 use crate::eval::{Oracle, Stats};
 use crate::rng::{Stream, derive};
-use crate::robot::dh::DhChain;
-use crate::scenario::Scenario;
+use crate::world::World;
 
 /// No ground-truth set, size or test set may ask for more points than this per region.
 const MAX_POINTS: usize = 1_000_000;
@@ -97,9 +95,7 @@ impl StudyConfig {
                         .into(),
                 );
             }
-            MethodKind::parse(name).map_err(|e| {
-                format!("methods: {}", e.to_string().replace("invalid input: ", ""))
-            })?;
+            MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
             if self.methods[..i].contains(name) {
                 return Err(format!("methods: '{name}' is listed twice"));
             }
@@ -212,23 +208,38 @@ fn layout_index(d: DistributionKind) -> u64 {
         .expect("every layout is in ALL") as u64
 }
 
-/// A campaign of `points` measured points in `region` with `layout`, drawn from `seed`.
-fn measure(
-    scenario: &Scenario,
-    sim: &Simulation,
-    region: &RegionConfig,
-    layout: DistributionKind,
-    points: usize,
-    seed: u64,
-) -> Result<Campaign> {
-    let region = RegionConfig {
-        points,
-        distribution: layout,
-        ..region.clone()
-    };
-    let mut setup = setup(scenario, sim);
-    setup.seed = seed;
-    setup.run(std::slice::from_ref(&region))
+/// Where a study's campaigns are measured, and how: the world, the campaign configuration, the regions, and the
+/// selector of model-based layouts.
+#[derive(Clone, Copy)]
+struct Measure<'a> {
+    world: &'a World,
+    campaign: &'a CampaignConfig,
+    regions: &'a [RegionConfig],
+    selector: Option<&'a dyn crate::campaign::Selector>,
+}
+
+impl Measure<'_> {
+    /// A campaign of `points` measured points in region `r` with `layout`, drawn from `seed`.
+    fn campaign(
+        &self,
+        r: usize,
+        layout: DistributionKind,
+        points: usize,
+        seed: u64,
+    ) -> Result<Campaign> {
+        let region = RegionConfig {
+            points,
+            distribution: layout,
+            ..self.regions[r].clone()
+        };
+        Generator {
+            world: self.world,
+            config: self.campaign,
+            seed,
+            selector: self.selector,
+        }
+        .run(std::slice::from_ref(&region))
+    }
 }
 
 /// The campaign as a method sees it (`measurements.csv` read back).
@@ -293,9 +304,9 @@ struct PointData {
 
 /// Everything read-only the jobs share.
 struct Shared<'a> {
-    scenario: &'a Scenario,
+    measure: Measure<'a>,
     config: &'a StudyConfig,
-    sim: &'a Simulation,
+    world: &'a World,
     ctx: FitContext<'a>,
     /// Per method, the model whose observability the run reports.
     designs: Vec<Option<DesignModel<'a>>>,
@@ -305,21 +316,21 @@ struct Shared<'a> {
     progress: &'a Counter,
 }
 
-/// Runs the scenario's `[study]` on the current rayon pool (install a pool to choose the thread count).
-/// Errors: no `[study]` section, a robot that does not load, a region whose test set or ground truth cannot
-/// be built. Runs that fail (a campaign the region cannot supply, a method that cannot be fitted) are
-/// recorded as failed with their reason.
-pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult> {
-    let config = scenario.study.as_ref().ok_or_else(|| Error::Scenario {
-        origin: scenario.origin.clone(),
-        message: "no [study] section: nothing to sweep".into(),
-    })?;
+/// Runs the study `config` over `regions` of `world`, with the campaign configuration `campaign`, on the current
+/// rayon pool (install a pool to choose the thread count). `config` must have passed
+/// [`StudyConfig::validate`] for `regions`. Errors: a region whose test set or ground truth cannot be built.
+/// Runs that fail (a campaign the region cannot supply, a method that cannot be fitted) are recorded as failed
+/// with their reason.
+pub fn run_study(
+    world: &World,
+    campaign: &CampaignConfig,
+    regions: &[RegionConfig],
+    config: &StudyConfig,
+    progress: Progress,
+) -> Result<StudyResult> {
     config
-        .validate(&scenario.regions)
-        .map_err(|message| Error::Scenario {
-            origin: scenario.origin.clone(),
-            message: format!("study.{message}"),
-        })?;
+        .validate(regions)
+        .map_err(|message| Error::Invalid(format!("study.{message}")))?;
     let kinds: Vec<MethodKind> = config
         .methods
         .iter()
@@ -331,30 +342,36 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         .position(|m| m == config.detail_method())
         .unwrap_or(0);
 
-    let sim = crate::campaign::world(scenario)?;
-    let dh = DhChain::from_chain(&sim.nominal)?;
-    let truth = GroundTruth::build(scenario, &sim, &config.ground_truth_config())?;
-    let regions = scenario
-        .regions
+    let ctx = fit_context(world);
+    let selector = DOptimal::when_needed(
+        config.distributions.iter().copied(),
+        &campaign.selection,
+        &ctx,
+        &world.mounting.nominal,
+    )?;
+    let measure = Measure {
+        world,
+        campaign,
+        regions,
+        selector: selector
+            .as_ref()
+            .map(|s| s as &dyn crate::campaign::Selector),
+    };
+    let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth_config())?;
+    let region_sets = regions
         .iter()
         .enumerate()
         .map(|(r, region)| {
-            let seed = campaign_seed(scenario.seed, r as u64, TEST_SET, 0, 0);
-            let campaign = measure(
-                scenario,
-                &sim,
-                region,
-                DistributionKind::Uniform,
-                config.test_points,
-                seed,
-            )
-            .map_err(|e| {
-                Error::Unreachable(format!(
-                    "the study's test set of {} points: {}",
-                    config.test_points,
-                    e.to_string().replace("unreachable: ", "")
-                ))
-            })?;
+            let seed = campaign_seed(world.seed(), r as u64, TEST_SET, 0, 0);
+            let campaign = measure
+                .campaign(r, DistributionKind::Uniform, config.test_points, seed)
+                .map_err(|e| {
+                    Error::Unreachable(format!(
+                        "the study's test set of {} points: {}",
+                        config.test_points,
+                        e.detail()
+                    ))
+                })?;
             Ok(RegionSets {
                 test: dataset(
                     &campaign,
@@ -366,7 +383,7 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         .collect::<Result<Vec<_>>>()?;
 
     let mut jobs = Vec::new();
-    for region in 0..scenario.regions.len() {
+    for region in 0..regions.len() {
         for distribution in 0..config.distributions.len() {
             for size in 0..config.sizes.len() {
                 for seed in 0..config.seeds {
@@ -381,25 +398,19 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         }
     }
     let counter = Counter::new(progress, jobs.len() * kinds.len());
-    let ctx = FitContext {
-        chain: &sim.nominal,
-        dh: &dh,
-        payload: scenario.robot.payload(),
-        regression: RegressionOptions::default(),
-    };
     let designs = kinds
         .iter()
-        .map(|&kind| DesignModel::for_method(kind, &ctx, &sim.mounting.nominal))
+        .map(|&kind| DesignModel::for_method(kind, &ctx, &world.mounting.nominal))
         .collect::<Result<Vec<_>>>()?;
     let shared = Shared {
-        scenario,
+        measure,
         config,
-        sim: &sim,
+        world,
         ctx,
         designs,
         kinds,
         detail_method,
-        regions,
+        regions: region_sets,
         progress: &counter,
     };
     let outputs: Vec<(Job, JobOutput)> =
@@ -423,22 +434,22 @@ pub fn run_study(scenario: &Scenario, progress: Progress) -> Result<StudyResult>
         .into_iter()
         .max_by_key(|d| d.n_train)
         .unwrap_or_else(|| Detail {
-            region: scenario.regions[0].name.clone(),
+            region: regions[0].name.clone(),
             distribution: config.distributions[0],
             method: config.methods[detail_method].clone(),
             n_train: config.sizes.iter().copied().max().unwrap_or(0),
             points: Vec::new(),
             grid: Vec::new(),
             histograms: BTreeMap::new(),
-            tracker: sim.tracker.pose,
+            tracker: world.tracker.pose,
         });
     Ok(StudyResult {
-        scenario: scenario.clone(),
+        scenario: world.config.clone(),
         config: config.clone(),
-        regions: scenario.regions.clone(),
+        regions: regions.to_vec(),
         runs,
         detail,
-        orientation: sim.mounting.count() >= 3,
+        orientation: world.mounting.count() >= 3,
     })
 }
 
@@ -451,7 +462,7 @@ struct Outcome {
 impl Shared<'_> {
     fn key(&self, job: Job, m: usize) -> RunKey {
         RunKey {
-            region: self.scenario.regions[job.region].name.clone(),
+            region: self.measure.regions[job.region].name.clone(),
             distribution: self.config.distributions[job.distribution],
             method: self.config.methods[m].clone(),
             n_train: self.config.sizes[job.size],
@@ -503,9 +514,9 @@ impl Shared<'_> {
     fn run(&self, job: Job) -> JobOutput {
         let n = self.config.sizes[job.size];
         let layout = self.config.distributions[job.distribution];
-        let region = &self.scenario.regions[job.region];
+        let region = &self.measure.regions[job.region];
         let seed = campaign_seed(
-            self.scenario.seed,
+            self.world.seed(),
             job.region as u64,
             layout_index(layout),
             n as u64,
@@ -523,7 +534,7 @@ impl Shared<'_> {
             }
         };
         let sets = &self.regions[job.region];
-        let floor_mean = Oracle::new(self.sim)
+        let floor_mean = Oracle::new(self.world)
             .and_then(|o| o.registered_on(&[&train, &val]))
             .ok()
             .and_then(|oracle| {
@@ -562,10 +573,9 @@ impl Shared<'_> {
     /// The job's campaign and its training and validation sets.
     fn prepare(&self, job: Job, seed: u64) -> Result<(Campaign, Dataset, Dataset)> {
         let n = self.config.sizes[job.size];
-        let region = &self.scenario.regions[job.region];
         let layout = self.config.distributions[job.distribution];
         let total = self.config.campaign_points(n);
-        let campaign = measure(self.scenario, self.sim, region, layout, total, seed)?;
+        let campaign = self.measure.campaign(job.region, layout, total, seed)?;
         let data = dataset(&campaign, "the study's campaign")?;
         let mut order: Vec<usize> = (0..data.len()).collect();
         order.shuffle(&mut derive(seed, Stream::Split, &[]));
@@ -614,7 +624,7 @@ impl Shared<'_> {
         let closed = closed_loop_errors(
             model.as_ref(),
             truth,
-            &self.sim.robot,
+            &self.world.robot,
             &truth.closed_loop.points,
         );
         let views = [
@@ -674,10 +684,10 @@ impl Shared<'_> {
         grid: &[f64],
         shell: &[f64],
     ) -> Vec<DistanceBand> {
-        let training = &self.scenario.regions[job.region];
+        let training = &self.measure.regions[job.region];
         let edges = &self.config.distance_bands_m;
         let mut bands = Vec::new();
-        for (r, region) in self.scenario.regions.iter().enumerate() {
+        for (r, region) in self.measure.regions.iter().enumerate() {
             let truth = &self.regions[r].truth;
             let points = truth.grid.points.iter().chain(&truth.shell.points);
             let errors: Vec<f64> = if r == job.region {
@@ -789,7 +799,7 @@ impl Shared<'_> {
             points,
             grid,
             histograms,
-            tracker: self.sim.tracker.pose,
+            tracker: self.world.tracker.pose,
         })
     }
 }

@@ -1,0 +1,133 @@
+//! The `campaign` job: simulate the scenario's campaign, evaluate the listed methods when it has an
+//! `[evaluation]`, run its `[study]` when it has one, and write every result file at once.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use serde_json::json;
+
+use crate::campaign::Simulation;
+use crate::error::{Error, Result};
+use crate::eval::{self, Budget, Evaluation, Stats};
+use crate::scenario::Scenario;
+use crate::study::StudyResult;
+use crate::study::sweep::{self, Progress};
+use crate::{measurements, output, report};
+
+/// How to run the job.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    /// Output directory; `results/<scenario name>` when absent.
+    pub out: Option<PathBuf>,
+    /// Keep the wall-clock fit times in the study's `fit_ms` column (otherwise NaN, so that the files are
+    /// byte-identical for the same scenario whatever the machine and thread count).
+    pub timings: bool,
+}
+
+/// What the job did, for the binary to print.
+pub struct Outcome {
+    pub scenario: Scenario,
+    pub sim: Simulation,
+    /// How long the campaign took to simulate.
+    pub generated: Duration,
+    /// The measured errors after rigid registration (the paper's Table 1 "Measured" column), m.
+    pub measured: Stats,
+    pub budget: Budget,
+    pub evaluation: Option<(Evaluation, Duration)>,
+    pub study: Option<(StudyResult, Duration)>,
+    /// Where the files went.
+    pub out: PathBuf,
+}
+
+/// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
+/// `evaluation.json` and the study's files, into the output directory, all or none.
+pub fn run(scenario: Scenario, options: &Options) -> Result<Outcome> {
+    let started = Instant::now();
+    let sim = super::simulate(&scenario)?;
+    let generated = started.elapsed();
+    let world = &sim.world;
+    let campaign = &sim.campaign;
+
+    let measured = eval::measured(campaign)?;
+    let commands: Vec<Vec<f64>> = campaign.points.iter().map(|p| p.q_cmd.clone()).collect();
+    let budget = Budget::of(&world.nominal, &world.robot, &world.mounting, &commands)?;
+
+    let out = options
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("results").join(&scenario.name));
+    let q = world.tracker.pose.rotation.quaternion();
+    let report = json!({
+        "scenario": scenario,
+        "points": campaign.points.len(),
+        "rejections": campaign.rejections,
+        "truth": {
+            "perturbation": world.robot.perturbation,
+            "mounting": world.mounting,
+            "tracker_pose": {
+                "translation_m": <[f64; 3]>::from(world.tracker.pose.translation.vector),
+                "rotation_quaternion_wxyz": [q.w, q.i, q.j, q.k],
+            },
+        },
+        "measured_mm": measured.scaled(1e3),
+        "error_budget_mm": {
+            "all_systematic": budget.all_systematic.scaled(1e3),
+            "elastic_only": budget.elastic_only.scaled(1e3),
+            "rigid_only": budget.rigid_only.scaled(1e3),
+        },
+    });
+    let mut files: Vec<(String, Vec<u8>)> = vec![
+        (
+            "measurements.csv".into(),
+            measurements::measurements_csv(campaign)?,
+        ),
+        ("truth.csv".into(), measurements::truth_csv(campaign)?),
+        ("campaign.json".into(), to_json("campaign.json", &report)?),
+    ];
+    let evaluation = match &scenario.evaluation {
+        Some(config) => {
+            let started = Instant::now();
+            let evaluation = eval::evaluate(&sim, &scenario.campaign, &scenario.regions, config)?;
+            files.push((
+                "evaluation.json".into(),
+                to_json("evaluation.json", &evaluation)?,
+            ));
+            Some((evaluation, started.elapsed()))
+        }
+        None => None,
+    };
+    let study = match &scenario.study {
+        Some(_) => {
+            let started = Instant::now();
+            let config = super::study_config(&scenario)?;
+            let mut study = sweep::run_study(
+                world,
+                &scenario.campaign,
+                &scenario.regions,
+                config,
+                Progress::Auto,
+            )?;
+            if !options.timings {
+                study.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
+            }
+            files.extend(report::study_files(&study, &world.nominal)?);
+            Some((study, started.elapsed()))
+        }
+        None => None,
+    };
+    output::write_files(&out, &files)?;
+    Ok(Outcome {
+        scenario,
+        sim,
+        generated,
+        measured,
+        budget,
+        evaluation,
+        study,
+        out,
+    })
+}
+
+fn to_json(name: &str, value: &impl serde::Serialize) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(value).map_err(|e| Error::Invalid(format!("{name}: {e}")))
+}
