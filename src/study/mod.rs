@@ -15,51 +15,11 @@ use crate::design::Indices;
 use crate::eval::Stats;
 use crate::world::WorldConfig;
 
+pub mod config;
+mod progress;
 pub mod sweep;
 
-fn default_validation_ratio() -> f64 {
-    0.5
-}
-
-fn default_distance_bands() -> Vec<f64> {
-    vec![0.025, 0.05, 0.1, 0.2]
-}
-
-/// The `[study]` section of a scenario.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct StudyConfig {
-    /// Training-set sizes (points), each a separate campaign.
-    pub sizes: Vec<usize>,
-    /// Point layouts to compare.
-    pub distributions: Vec<DistributionKind>,
-    /// Methods by name (as `calibrate --method`); the oracle is always run as the floor.
-    pub methods: Vec<String>,
-    /// Repetitions: seeds 0..seeds of the campaign draws (layout, orientations, noise); the robot stays the
-    /// scenario's one.
-    pub seeds: u64,
-    /// Validation points measured in addition to each training set, as a fraction of it (the paper's
-    /// 50 / 25 split gives 0.5); at least 1 point.
-    #[serde(default = "default_validation_ratio")]
-    pub validation_ratio: f64,
-    /// Measured test points per region: one fixed uniform campaign shared by every run.
-    pub test_points: usize,
-    /// Noise-free ground-truth grid points per region, shared by every run.
-    pub grid_points: usize,
-    /// Thickness (m) and points of the shell just outside each region.
-    pub shell_width_m: f64,
-    pub shell_points: usize,
-    /// Ground-truth targets per region for the closed-loop view.
-    pub closed_loop_points: usize,
-    /// The method shown point by point (error arrows, residual grid); the first method when absent.
-    #[serde(default)]
-    pub detail_method: Option<String>,
-    /// Upper edges (m, ascending) of the bands of distance from the training region by which `outside.csv`
-    /// groups the ground-truth points of every region (grid and shell): inside (0), then (0, b₁], (b₁, b₂],
-    /// …, and beyond the last edge.
-    #[serde(default = "default_distance_bands")]
-    pub distance_bands_m: Vec<f64>,
-}
+pub use config::StudyConfig;
 
 /// Ground-truth errors of one run in one band of distance from its training region, over the ground-truth
 /// points (grid and shell) of one region where the calibration is used.

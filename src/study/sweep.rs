@@ -14,16 +14,15 @@
 //! same numbers whatever else the study lists, and whatever the thread count.
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Isometry3, Point3};
 use rand::RngCore;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
+use super::progress::Counter;
+pub use super::progress::Progress;
 use super::{
     BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
     StudyResult,
@@ -34,165 +33,14 @@ use crate::dataset::Dataset;
 use crate::design::{DOptimal, DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::truth::{
-    EvaluationConfig, GroundTruth, ORACLE, TruthSet, closed_loop_errors, fit_context, test_errors,
-    truth_errors,
+    GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
 };
 use crate::eval::{Oracle, Stats};
 use crate::rng::{Stream, derive};
 use crate::world::World;
 
-/// No ground-truth set, size or test set may ask for more points than this per region.
-const MAX_POINTS: usize = 1_000_000;
-/// A study of more campaigns than this is surely a typo.
-const MAX_CAMPAIGNS: u128 = 1_000_000;
 /// The region-level seed index of the test set, far from any layout index.
 const TEST_SET: u64 = u64::MAX;
-
-/// How the sweep reports progress on stderr.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Progress {
-    /// A progress bar when stderr is a terminal, otherwise [`Progress::Lines`].
-    Auto,
-    /// A plain line every 10 % of the runs.
-    Lines,
-    /// Nothing.
-    Hidden,
-}
-
-impl StudyConfig {
-    /// Checks that need no robot; `regions` are the scenario's. Messages name the field (`sizes: …`).
-    pub fn validate(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
-        if self.sizes.is_empty() {
-            return Err("sizes is empty: list at least one training-set size".into());
-        }
-        for (i, &n) in self.sizes.iter().enumerate() {
-            if n == 0 {
-                return Err("sizes: a training set needs at least 1 point, got 0".into());
-            }
-            if n > MAX_POINTS {
-                return Err(format!("sizes: {n} exceeds {MAX_POINTS}"));
-            }
-            if self.sizes[..i].contains(&n) {
-                return Err(format!("sizes: {n} is listed twice"));
-            }
-        }
-        if self.distributions.is_empty() {
-            return Err("distributions is empty: list at least one layout".into());
-        }
-        for (i, d) in self.distributions.iter().enumerate() {
-            if self.distributions[..i].contains(d) {
-                return Err(format!("distributions: '{}' is listed twice", d.name()));
-            }
-        }
-        if self.methods.is_empty() {
-            return Err("methods is empty: list at least one method".into());
-        }
-        for (i, name) in self.methods.iter().enumerate() {
-            if name == ORACLE {
-                return Err(
-                    "methods: 'oracle' is always run (its ground-truth mean is every run's floor_mean); \
-                     do not list it"
-                        .into(),
-                );
-            }
-            MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
-            if self.methods[..i].contains(name) {
-                return Err(format!("methods: '{name}' is listed twice"));
-            }
-        }
-        if let Some(detail) = &self.detail_method
-            && !self.methods.contains(detail)
-        {
-            return Err(format!(
-                "detail_method: '{detail}' is not among the methods ({})",
-                self.methods.join(", ")
-            ));
-        }
-        if self.seeds == 0 {
-            return Err("seeds = 0: at least one repetition is needed".into());
-        }
-        let campaigns = (regions.len() as u128)
-            * (self.distributions.len() as u128)
-            * (self.sizes.len() as u128)
-            * (self.seeds as u128);
-        if campaigns > MAX_CAMPAIGNS {
-            return Err(format!(
-                "seeds = {}: {campaigns} campaigns exceed {MAX_CAMPAIGNS}",
-                self.seeds
-            ));
-        }
-        if !(self.validation_ratio.is_finite() && self.validation_ratio > 0.0) {
-            return Err(format!(
-                "validation_ratio = {} must be finite and positive",
-                self.validation_ratio
-            ));
-        }
-        if self.test_points == 0 {
-            return Err("test_points must be at least 1".into());
-        }
-        if self.test_points > MAX_POINTS {
-            return Err(format!(
-                "test_points = {} exceeds {MAX_POINTS}",
-                self.test_points
-            ));
-        }
-        self.ground_truth_config().validate()?;
-        if self
-            .distance_bands_m
-            .iter()
-            .any(|b| !(b.is_finite() && *b > 0.0))
-            || self.distance_bands_m.windows(2).any(|w| w[0] >= w[1])
-        {
-            return Err(format!(
-                "distance_bands_m = {:?} must be positive, finite and ascending",
-                self.distance_bands_m
-            ));
-        }
-        for &n in &self.sizes {
-            let total = self.campaign_points(n);
-            if let Some(r) = regions.iter().find(|r| total > r.points) {
-                return Err(format!(
-                    "sizes: {n} training + {} validation points exceed the points = {} of region '{}' \
-                     (the most one of its campaigns may measure)",
-                    total - n,
-                    r.points,
-                    r.name
-                ));
-            }
-        }
-        Ok(())
-    }
-
-    /// Validation points measured with a training set of `n`: `ceil(validation_ratio · n)`, at least 1.
-    pub fn validation_points(&self, n: usize) -> usize {
-        ((self.validation_ratio * n as f64).ceil() as usize).max(1)
-    }
-
-    /// Points of the campaign of a training set of `n`: training plus validation.
-    pub fn campaign_points(&self, n: usize) -> usize {
-        n + self.validation_points(n)
-    }
-
-    /// The method shown point by point: `detail_method`, or the first method.
-    pub fn detail_method(&self) -> &str {
-        self.detail_method
-            .as_deref()
-            .or(self.methods.first().map(String::as_str))
-            .unwrap_or_default()
-    }
-
-    /// The ground-truth sets as the evaluation builds them.
-    fn ground_truth_config(&self) -> EvaluationConfig {
-        EvaluationConfig {
-            methods: Vec::new(),
-            grid_points: self.grid_points,
-            shell_width_m: self.shell_width_m,
-            shell_points: self.shell_points,
-            closed_loop_points: self.closed_loop_points,
-            ..EvaluationConfig::default()
-        }
-    }
-}
 
 /// The seed of one campaign of the study: region `r`, layout `d` (its place in [`DistributionKind::ALL`]),
 /// training-set size `n` and repetition `s`; the test set uses `d = TEST_SET`.
@@ -824,66 +672,5 @@ fn reason(e: &Error) -> String {
     match e {
         Error::Invalid(message) => message.clone(),
         other => other.to_string(),
-    }
-}
-
-/// Counts finished runs and shows it: a bar on a terminal, else a line every 10 %.
-struct Counter {
-    bar: Option<ProgressBar>,
-    lines: bool,
-    done: AtomicUsize,
-    total: usize,
-}
-
-impl Counter {
-    fn new(progress: Progress, total: usize) -> Counter {
-        let progress = match progress {
-            Progress::Auto if std::io::stderr().is_terminal() => None,
-            Progress::Auto => Some(Progress::Lines),
-            other => Some(other),
-        };
-        let bar = progress.is_none().then(|| {
-            let bar = ProgressBar::new(total as u64);
-            if let Ok(style) = ProgressStyle::with_template(
-                "study {elapsed_precise} [{bar:40}] {pos}/{len} runs, {eta} left",
-            ) {
-                bar.set_style(style.progress_chars("=> "));
-            }
-            bar
-        });
-        let lines = progress == Some(Progress::Lines);
-        if lines {
-            eprintln!("study: {total} runs");
-        }
-        Counter {
-            bar,
-            lines,
-            done: AtomicUsize::new(0),
-            total,
-        }
-    }
-
-    fn add(&self, runs: usize) {
-        let before = self.done.fetch_add(runs, Ordering::Relaxed);
-        let after = before + runs;
-        if let Some(bar) = &self.bar {
-            bar.inc(runs as u64);
-        }
-        if self.lines && self.total > 0 {
-            let tenth = |k: usize| k * 10 / self.total;
-            if tenth(after) > tenth(before) {
-                eprintln!(
-                    "study: {} % ({after} of {} runs)",
-                    tenth(after) * 10,
-                    self.total
-                );
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
     }
 }

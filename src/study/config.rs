@@ -1,0 +1,191 @@
+//! The `[study]` section of a scenario and its checks.
+
+use serde::{Deserialize, Serialize};
+
+use crate::calib::method::MethodKind;
+use crate::campaign::{DistributionKind, RegionConfig};
+use crate::eval::truth::{EvaluationConfig, ORACLE};
+
+/// No ground-truth set, size or test set may ask for more points than this per region.
+const MAX_POINTS: usize = 1_000_000;
+/// A study of more campaigns than this is surely a typo.
+const MAX_CAMPAIGNS: u128 = 1_000_000;
+
+fn default_validation_ratio() -> f64 {
+    0.5
+}
+
+fn default_distance_bands() -> Vec<f64> {
+    vec![0.025, 0.05, 0.1, 0.2]
+}
+
+/// The `[study]` section of a scenario.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct StudyConfig {
+    /// Training-set sizes (points), each a separate campaign.
+    pub sizes: Vec<usize>,
+    /// Point layouts to compare.
+    pub distributions: Vec<DistributionKind>,
+    /// Methods by name (as `calibrate --method`); the oracle is always run as the floor.
+    pub methods: Vec<String>,
+    /// Repetitions: seeds 0..seeds of the campaign draws (layout, orientations, noise); the robot stays the
+    /// scenario's one.
+    pub seeds: u64,
+    /// Validation points measured in addition to each training set, as a fraction of it (the paper's
+    /// 50 / 25 split gives 0.5); at least 1 point.
+    #[serde(default = "default_validation_ratio")]
+    pub validation_ratio: f64,
+    /// Measured test points per region: one fixed uniform campaign shared by every run.
+    pub test_points: usize,
+    /// Noise-free ground-truth grid points per region, shared by every run.
+    pub grid_points: usize,
+    /// Thickness (m) and points of the shell just outside each region.
+    pub shell_width_m: f64,
+    pub shell_points: usize,
+    /// Ground-truth targets per region for the closed-loop view.
+    pub closed_loop_points: usize,
+    /// The method shown point by point (error arrows, residual grid); the first method when absent.
+    #[serde(default)]
+    pub detail_method: Option<String>,
+    /// Upper edges (m, ascending) of the bands of distance from the training region by which `outside.csv`
+    /// groups the ground-truth points of every region (grid and shell): inside (0), then (0, b₁], (b₁, b₂],
+    /// …, and beyond the last edge.
+    #[serde(default = "default_distance_bands")]
+    pub distance_bands_m: Vec<f64>,
+}
+
+impl StudyConfig {
+    /// Checks that need no robot; `regions` are the scenario's. Messages name the field (`sizes: …`).
+    pub fn validate(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
+        if self.sizes.is_empty() {
+            return Err("sizes is empty: list at least one training-set size".into());
+        }
+        for (i, &n) in self.sizes.iter().enumerate() {
+            if n == 0 {
+                return Err("sizes: a training set needs at least 1 point, got 0".into());
+            }
+            if n > MAX_POINTS {
+                return Err(format!("sizes: {n} exceeds {MAX_POINTS}"));
+            }
+            if self.sizes[..i].contains(&n) {
+                return Err(format!("sizes: {n} is listed twice"));
+            }
+        }
+        if self.distributions.is_empty() {
+            return Err("distributions is empty: list at least one layout".into());
+        }
+        for (i, d) in self.distributions.iter().enumerate() {
+            if self.distributions[..i].contains(d) {
+                return Err(format!("distributions: '{}' is listed twice", d.name()));
+            }
+        }
+        if self.methods.is_empty() {
+            return Err("methods is empty: list at least one method".into());
+        }
+        for (i, name) in self.methods.iter().enumerate() {
+            if name == ORACLE {
+                return Err(
+                    "methods: 'oracle' is always run (its ground-truth mean is every run's floor_mean); \
+                     do not list it"
+                        .into(),
+                );
+            }
+            MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
+            if self.methods[..i].contains(name) {
+                return Err(format!("methods: '{name}' is listed twice"));
+            }
+        }
+        if let Some(detail) = &self.detail_method
+            && !self.methods.contains(detail)
+        {
+            return Err(format!(
+                "detail_method: '{detail}' is not among the methods ({})",
+                self.methods.join(", ")
+            ));
+        }
+        if self.seeds == 0 {
+            return Err("seeds = 0: at least one repetition is needed".into());
+        }
+        let campaigns = (regions.len() as u128)
+            * (self.distributions.len() as u128)
+            * (self.sizes.len() as u128)
+            * (self.seeds as u128);
+        if campaigns > MAX_CAMPAIGNS {
+            return Err(format!(
+                "seeds = {}: {campaigns} campaigns exceed {MAX_CAMPAIGNS}",
+                self.seeds
+            ));
+        }
+        if !(self.validation_ratio.is_finite() && self.validation_ratio > 0.0) {
+            return Err(format!(
+                "validation_ratio = {} must be finite and positive",
+                self.validation_ratio
+            ));
+        }
+        if self.test_points == 0 {
+            return Err("test_points must be at least 1".into());
+        }
+        if self.test_points > MAX_POINTS {
+            return Err(format!(
+                "test_points = {} exceeds {MAX_POINTS}",
+                self.test_points
+            ));
+        }
+        self.ground_truth_config().validate()?;
+        if self
+            .distance_bands_m
+            .iter()
+            .any(|b| !(b.is_finite() && *b > 0.0))
+            || self.distance_bands_m.windows(2).any(|w| w[0] >= w[1])
+        {
+            return Err(format!(
+                "distance_bands_m = {:?} must be positive, finite and ascending",
+                self.distance_bands_m
+            ));
+        }
+        for &n in &self.sizes {
+            let total = self.campaign_points(n);
+            if let Some(r) = regions.iter().find(|r| total > r.points) {
+                return Err(format!(
+                    "sizes: {n} training + {} validation points exceed the points = {} of region '{}' \
+                     (the most one of its campaigns may measure)",
+                    total - n,
+                    r.points,
+                    r.name
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Validation points measured with a training set of `n`: `ceil(validation_ratio · n)`, at least 1.
+    pub fn validation_points(&self, n: usize) -> usize {
+        ((self.validation_ratio * n as f64).ceil() as usize).max(1)
+    }
+
+    /// Points of the campaign of a training set of `n`: training plus validation.
+    pub fn campaign_points(&self, n: usize) -> usize {
+        n + self.validation_points(n)
+    }
+
+    /// The method shown point by point: `detail_method`, or the first method.
+    pub fn detail_method(&self) -> &str {
+        self.detail_method
+            .as_deref()
+            .or(self.methods.first().map(String::as_str))
+            .unwrap_or_default()
+    }
+
+    /// The ground-truth sets as the evaluation builds them.
+    pub(super) fn ground_truth_config(&self) -> EvaluationConfig {
+        EvaluationConfig {
+            methods: Vec::new(),
+            grid_points: self.grid_points,
+            shell_width_m: self.shell_width_m,
+            shell_points: self.shell_points,
+            closed_loop_points: self.closed_loop_points,
+            ..EvaluationConfig::default()
+        }
+    }
+}
