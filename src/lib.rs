@@ -78,7 +78,7 @@ mod module_order {
             for entry in std::fs::read_dir(path).unwrap() {
                 sources(&entry.unwrap().path(), out);
             }
-        } else if path.extension().is_some_and(|e| e == "rs") {
+        } else if path.is_file() && path.extension().is_some_and(|e| e == "rs") {
             out.push((
                 path.display().to_string(),
                 std::fs::read_to_string(path).unwrap(),
