@@ -1,5 +1,5 @@
 //! Reading a campaign back: `measurements.csv` (from the simulation or from a real tracker) as a
-//! [`Dataset`], `truth.csv` as a [`Truth`], and the seeded train/val/test split of the points.
+//! [`Dataset`], `truth.csv` as a [`TruthTable`], and the seeded train/val/test split of the points.
 //!
 //! Columns are found by name, so their order does not matter and unknown columns are ignored. Only the
 //! robot's joint columns and the tracker measurements `x1, y1, z1` (with `x2…z3` for a three-reflector
@@ -23,7 +23,7 @@ mod table;
 mod truth_table;
 
 pub use split::{Split, random_split, random_train_val};
-pub use truth_table::Truth;
+pub use truth_table::TruthTable;
 
 use table::{Dialect, Table, open};
 

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 
 /// What only the simulation knows about each point, for the evaluation.
 #[derive(Clone, Debug)]
-pub struct Truth {
+pub struct TruthTable {
     /// The file the truth came from, for messages.
     pub origin: String,
     pub point_ids: Vec<String>,
@@ -21,15 +21,15 @@ pub struct Truth {
     pub in_base: Vec<Vec<Point3<f64>>>,
 }
 
-impl Truth {
+impl TruthTable {
     /// Reads a `truth.csv`: `point_id` (or row numbers when absent), `true_x1…` and `trk_x1…`.
-    pub fn read(path: &Path) -> Result<Truth> {
+    pub fn read(path: &Path) -> Result<TruthTable> {
         let origin = path.display().to_string();
-        Truth::from_reader(open(path)?, &origin)
+        TruthTable::from_reader(open(path)?, &origin)
     }
 
     /// Reads truth CSV text from `reader`; `origin` names it in messages.
-    pub fn from_reader(reader: impl std::io::Read, origin: &str) -> Result<Truth> {
+    pub fn from_reader(reader: impl std::io::Read, origin: &str) -> Result<TruthTable> {
         let table = Table::load(reader, origin, Dialect::PLAIN)?;
         let required = |prefix: &str| -> Result<Vec<[usize; 3]>> {
             table.reflectors(prefix)?.ok_or_else(|| {
@@ -57,7 +57,7 @@ impl Truth {
         let in_tracker = rows
             .map(|r| table.points(r, &tracker_cols))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Truth {
+        Ok(TruthTable {
             origin: origin.to_string(),
             point_ids,
             in_tracker,
@@ -74,8 +74,8 @@ impl Truth {
     }
 
     /// A new truth with the rows at `indices`, in that order. Panics on an index out of range.
-    pub fn subset(&self, indices: &[usize]) -> Truth {
-        Truth {
+    pub fn subset(&self, indices: &[usize]) -> TruthTable {
+        TruthTable {
             origin: self.origin.clone(),
             point_ids: indices.iter().map(|&i| self.point_ids[i].clone()).collect(),
             in_tracker: indices
@@ -88,7 +88,7 @@ impl Truth {
 
     /// The rows reordered to match `dataset.point_ids`; error naming the first point_id missing from
     /// the truth file, or a reflector count that differs from the dataset's.
-    pub fn aligned_to(&self, dataset: &Dataset) -> Result<Truth> {
+    pub fn aligned_to(&self, dataset: &Dataset) -> Result<TruthTable> {
         let err = |message: String| Error::Data {
             origin: self.origin.clone(),
             message,
