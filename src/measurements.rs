@@ -7,18 +7,8 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::campaign::Campaign;
+use crate::dataset::FLANGE_COLUMNS;
 use crate::error::{Error, Result};
-
-/// The controller's nominal flange pose: position (m) and unit quaternion, base frame.
-pub const FLANGE_COLUMNS: [&str; 7] = [
-    "flange_x",
-    "flange_y",
-    "flange_z",
-    "flange_qw",
-    "flange_qx",
-    "flange_qy",
-    "flange_qz",
-];
 
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
     (1..=count)

@@ -6,7 +6,7 @@ use std::sync::OnceLock;
 
 use calibench::app::simulate;
 use calibench::campaign::Campaign;
-use calibench::dataset::{Dataset, Split, Truth, random_split};
+use calibench::dataset::{Dataset, Split, TruthTable as Truth, random_split};
 use calibench::measurements::{measurements_csv, truth_csv};
 use calibench::scenario::Scenario;
 use calibench::{Error, Result};

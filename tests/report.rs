@@ -7,10 +7,10 @@ use std::path::Path;
 use calibench::campaign::DistributionKind;
 use calibench::design::Indices;
 use calibench::eval::Stats;
+use calibench::report::aggregate::{CurvePoint, Spread, learning_curves, points_needed};
+use calibench::report::metrics::metrics_csv;
 use calibench::report::plots::{histograms_png, learning_curves_png};
-use calibench::report::summary::{
-    CurvePoint, Spread, learning_curves, metrics_csv, points_needed, summary_md,
-};
+use calibench::report::summary::summary_md;
 use calibench::scenario::Scenario;
 use calibench::study::{BeforeAfter, Detail, RunKey, RunMetrics, StudyConfig, StudyResult};
 use nalgebra::Isometry3;

@@ -22,7 +22,7 @@ use calibench::calib::method::{self, FitContext, Fitted, MethodKind, SavedModel}
 use calibench::calib::regression::RegressionOptions;
 use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::mapping::ColumnMapping;
-use calibench::dataset::{Dataset, Split, Truth, random_split, random_train_val};
+use calibench::dataset::{Dataset, Split, TruthTable, random_split, random_train_val};
 use calibench::eval::Stats;
 use calibench::eval::transfer::{self, TestRegistration};
 use calibench::robot::dh::DhChain;
@@ -294,7 +294,7 @@ fn fit(args: &FitArgs) -> Result<()> {
         ));
     }
     let truth = match &args.truth {
-        Some(path) => Some(Truth::read(path)?.aligned_to(&data)?),
+        Some(path) => Some(TruthTable::read(path)?.aligned_to(&data)?),
         None => None,
     };
     let f: [f64; 3] = args.split.as_slice().try_into().map_err(|_| {

@@ -38,8 +38,8 @@ use std::path::Path;
 use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::table::{Dialect, Table};
 use super::{Dataset, ExtraInputs, Split};
-use super::{Dialect, Table};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::chain::JointKind;

@@ -1,9 +1,13 @@
-//! The report of a study: `metrics.csv` (one tidy row per run), `summary.md` (tables a person reads), PNG plots,
-//! and the rerun recording `campaign.rrd`. Millimetres in everything a person reads.
+//! The report of a study: `metrics.csv` (one tidy row per run) and `outside.csv` ([`metrics`]), `summary.md`
+//! (text and tables a person reads: [`summary`], [`tables`]) from the aggregates over seeds ([`aggregate`]), PNG
+//! plots, and the rerun recording `campaign.rrd`. Millimetres in everything a person reads.
 
+pub mod aggregate;
+pub mod metrics;
 pub mod plots;
 pub mod recording;
 pub mod summary;
+pub mod tables;
 
 use crate::error::Result;
 use crate::robot::Chain;
@@ -14,8 +18,8 @@ use crate::study::StudyResult;
 pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Vec<u8>)>> {
     let summary = summary::summary_md(study)?;
     let mut files = vec![
-        ("metrics.csv".to_string(), summary::metrics_csv(study)?),
-        ("outside.csv".to_string(), summary::outside_csv(study)?),
+        ("metrics.csv".to_string(), metrics::metrics_csv(study)?),
+        ("outside.csv".to_string(), metrics::outside_csv(study)?),
     ];
     files.extend(plots::learning_curves_png(study)?);
     files.extend(plots::histograms_png(study)?);

@@ -15,7 +15,7 @@ use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
 use crate::error::{Error, Result};
-use crate::report::summary::{Curve, axes, floor_spread, learning_curves};
+use crate::report::aggregate::{Curve, axes, floor_spread, learning_curves};
 use crate::study::StudyResult;
 
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");

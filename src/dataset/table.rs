@@ -1,0 +1,265 @@
+//! A delimited text file held in memory, its columns found by name: the reader under every file the dataset
+//! module reads (the project's own CSV files and foreign exports read through a column mapping). It knows
+//! nothing of robots or trackers; [`super`] gives the columns their meaning. Every fault is one
+//! [`Error::Data`] naming the file, the row as a spreadsheet numbers it (the header is row 1) and the column.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use nalgebra::Point3;
+
+use crate::error::{Error, Result};
+
+pub(super) fn open(path: &Path) -> Result<std::fs::File> {
+    std::fs::File::open(path).map_err(|e| Error::Data {
+        origin: path.display().to_string(),
+        message: format!("cannot read: {e}"),
+    })
+}
+
+/// How a delimited file is written: `,` and `.` for the project's own files, anything for a mapped export.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Dialect {
+    pub(super) delimiter: u8,
+    pub(super) decimal: char,
+    /// Read through a column mapping: messages then name the mapping's settings, rows of empty cells are
+    /// skipped, and a header of one column hints at a wrong delimiter.
+    pub(super) mapped: bool,
+}
+
+impl Dialect {
+    pub(super) const PLAIN: Dialect = Dialect {
+        delimiter: b',',
+        decimal: '.',
+        mapped: false,
+    };
+
+    pub(super) fn mapped(delimiter: u8, decimal: char) -> Dialect {
+        Dialect {
+            delimiter,
+            decimal,
+            mapped: true,
+        }
+    }
+}
+
+/// A delimited file held in memory, every row of the header's length.
+pub(super) struct Table {
+    pub(super) origin: String,
+    pub(super) headers: Vec<String>,
+    pub(super) index: HashMap<String, usize>,
+    pub(super) rows: Vec<csv::StringRecord>,
+    pub(super) dialect: Dialect,
+}
+
+impl Table {
+    pub(super) fn load(
+        reader: impl std::io::Read,
+        origin: &str,
+        dialect: Dialect,
+    ) -> Result<Table> {
+        let err = |message: String| Error::Data {
+            origin: origin.to_string(),
+            message,
+        };
+        let csv_err = |e: csv::Error| {
+            let row = e.position().map(|p| format!("row {}: ", p.record() + 1));
+            let message = match e.kind() {
+                csv::ErrorKind::Utf8 { .. } => "not valid UTF-8".to_string(),
+                csv::ErrorKind::Io(io) => format!("cannot read: {io}"),
+                _ => e.to_string(),
+            };
+            err(format!("{}{message}", row.unwrap_or_default()))
+        };
+        let delimiter = (dialect.delimiter as char).escape_default();
+        let mut csv = csv::ReaderBuilder::new()
+            .delimiter(dialect.delimiter)
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .from_reader(reader);
+        let headers: Vec<String> = csv
+            .headers()
+            .map_err(csv_err)?
+            .iter()
+            .map(|h| h.trim_start_matches('\u{feff}').trim().to_string())
+            .collect();
+        if headers.iter().all(String::is_empty) {
+            return Err(err("empty file: no header row".into()));
+        }
+        if dialect.mapped && headers.len() == 1 {
+            let shown: String = headers[0].chars().take(40).collect();
+            return Err(err(format!(
+                "row 1: one column only with delimiter '{delimiter}' (the header reads '{shown}…'); is the delimiter right?"
+            )));
+        }
+        let mut index = HashMap::new();
+        for (i, h) in headers.iter().enumerate() {
+            if h.is_empty() {
+                continue;
+            }
+            if let Some(first) = index.insert(h.clone(), i) {
+                return Err(err(format!(
+                    "row 1: column '{h}' appears twice (columns {} and {})",
+                    first + 1,
+                    i + 1
+                )));
+            }
+        }
+        let mut rows = Vec::new();
+        for record in csv.records() {
+            let record = record.map_err(csv_err)?;
+            if dialect.mapped && record.iter().all(str::is_empty) {
+                continue;
+            }
+            if record.len() != headers.len() {
+                let hint = if dialect.mapped {
+                    format!(" (delimiter '{delimiter}')")
+                } else {
+                    String::new()
+                };
+                return Err(err(format!(
+                    "row {}: {} fields, the header has {}{hint}",
+                    rows.len() + 2,
+                    record.len(),
+                    headers.len()
+                )));
+            }
+            rows.push(record);
+        }
+        if rows.is_empty() {
+            return Err(err("no data rows after the header".into()));
+        }
+        Ok(Table {
+            origin: origin.to_string(),
+            headers,
+            index,
+            rows,
+            dialect,
+        })
+    }
+
+    /// The column `name`, which a mapping gives as `role`; an error naming both and what the header has.
+    pub(super) fn find(&self, name: &str, role: &str) -> Result<usize> {
+        self.index.get(name.trim()).copied().ok_or_else(|| {
+            const SHOWN: usize = 16;
+            let mut names: Vec<&str> = self
+                .headers
+                .iter()
+                .take(SHOWN)
+                .map(String::as_str)
+                .collect();
+            if self.headers.len() > SHOWN {
+                names.push("…");
+            }
+            self.error(format!(
+                "no column '{name}' (the mapping's {role}); the header has {} columns: {}",
+                self.headers.len(),
+                names.join(", ")
+            ))
+        })
+    }
+
+    pub(super) fn error(&self, message: String) -> Error {
+        Error::Data {
+            origin: self.origin.clone(),
+            message,
+        }
+    }
+
+    pub(super) fn column(&self, name: &str) -> Option<usize> {
+        self.index.get(name).copied()
+    }
+
+    /// The header's names, the first few of them when there are many.
+    pub(super) fn header_summary(&self) -> String {
+        const SHOWN: usize = 12;
+        let names: Vec<&str> = self
+            .headers
+            .iter()
+            .take(SHOWN)
+            .map(String::as_str)
+            .collect();
+        if self.headers.len() > SHOWN {
+            format!("{}, … ({} columns)", names.join(", "), self.headers.len())
+        } else {
+            names.join(", ")
+        }
+    }
+
+    /// "row R, column NAME" for data row `r` (0-based).
+    pub(super) fn at(&self, r: usize, c: usize) -> String {
+        format!("row {}, column {}", r + 2, self.headers[c])
+    }
+
+    pub(super) fn cell(&self, r: usize, c: usize) -> &str {
+        &self.rows[r][c]
+    }
+
+    /// A number in the file's dialect (a mapped export may write a decimal comma).
+    pub(super) fn number(&self, r: usize, c: usize) -> Result<f64> {
+        let cell = self.cell(r, c);
+        if cell.is_empty() {
+            return Err(self.error(format!("{}: empty, a number is needed", self.at(r, c))));
+        }
+        let decimal = self.dialect.decimal;
+        let not_a_number = || {
+            let hint = if self.dialect.mapped {
+                format!(" (the mapping's decimal separator is '{decimal}')")
+            } else {
+                String::new()
+            };
+            self.error(format!("{}: '{cell}' is not a number{hint}", self.at(r, c)))
+        };
+        let value: f64 = if decimal == '.' {
+            if self.dialect.mapped && cell.contains(',') {
+                return Err(not_a_number());
+            }
+            cell.parse().map_err(|_| not_a_number())?
+        } else {
+            if cell.contains('.') {
+                return Err(not_a_number());
+            }
+            cell.replace(decimal, ".")
+                .parse()
+                .map_err(|_| not_a_number())?
+        };
+        if !value.is_finite() {
+            return Err(self.error(format!("{}: '{cell}' is not finite", self.at(r, c))));
+        }
+        Ok(value)
+    }
+
+    pub(super) fn numbers(&self, r: usize, cols: &[usize]) -> Result<Vec<f64>> {
+        cols.iter().map(|&c| self.number(r, c)).collect()
+    }
+
+    pub(super) fn points(&self, r: usize, cols: &[[usize; 3]]) -> Result<Vec<Point3<f64>>> {
+        cols.iter()
+            .map(|&[x, y, z]| {
+                Ok(Point3::new(
+                    self.number(r, x)?,
+                    self.number(r, y)?,
+                    self.number(r, z)?,
+                ))
+            })
+            .collect()
+    }
+
+    /// All of `names` as columns, none of them (`None`), or an error naming the first one missing.
+    pub(super) fn group(&self, names: &[&str]) -> Result<Option<Vec<usize>>> {
+        let found: Vec<Option<usize>> = names.iter().map(|n| self.column(n)).collect();
+        if found.iter().all(Option::is_none) {
+            return Ok(None);
+        }
+        if let Some(k) = found.iter().position(Option::is_none) {
+            let present = found.iter().position(Option::is_some).unwrap_or(0);
+            return Err(self.error(format!(
+                "no column '{}' though '{}' is present: the columns {} go together",
+                names[k],
+                names[present],
+                names.join(", ")
+            )));
+        }
+        Ok(Some(found.into_iter().flatten().collect()))
+    }
+}
