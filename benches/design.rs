@@ -5,7 +5,8 @@
 
 use std::time::{Duration, Instant};
 
-use calibench::calib::method::{FitContext, MethodKind};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::{DistributionKind, RegionConfig, simulate};
 use calibench::design::{DesignModel, SelectOptions, d_optimal};
 use calibench::robot::dh::DhChain;

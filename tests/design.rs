@@ -5,7 +5,8 @@
 mod common;
 use common::edit;
 
-use calibench::calib::method::{FitContext, MethodKind};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::simulate;
 use calibench::design::{DesignModel, Indices, SelectOptions, d_optimal};
 use calibench::robot::Chain;

@@ -50,7 +50,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::error_model::{ErrorFrames, ErrorModelKind, ErrorParam, FrameErrors, so3_left_jacobian};
-use super::method::{FitContext, Fitted, Prediction, SavedModel};
+use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -715,15 +715,39 @@ fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiability {
     }
 }
 
+pub const KINEMATIC: MethodInfo = MethodInfo {
+    name: "kinematic",
+    summary: "classical calibration: constant DH-frame errors, tracker frame and mounting by Levenberg–Marquardt",
+    takes_inputs: false,
+    has_robot_parameters: true,
+    base: None,
+    design: Design::Identification { elastic: false },
+};
+
+pub const ELASTIC: MethodInfo = MethodInfo {
+    name: "elastic",
+    summary: "kinematic calibration plus one joint compliance per joint under the nominal gravity torques",
+    takes_inputs: false,
+    has_robot_parameters: true,
+    base: None,
+    design: Design::Identification { elastic: true },
+};
+
+fn method_from_name<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<&'static MethodInfo, D::Error> {
+    MethodInfo::deserialize_among(d, &[&KINEMATIC, &ELASTIC])
+}
+
 /// Everything a later run needs to predict: `model.json`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct KinematicModel {
     /// `kinematic` or `elastic`.
-    pub method: String,
-    pub joint_names: Vec<String>,
-    pub dh: DhChain,
-    /// The refined tracker frame and mounting: the registration test data are observed through.
-    pub registration: Registration,
+    #[serde(deserialize_with = "method_from_name")]
+    pub method: &'static MethodInfo,
+    /// The registration is the refined tracker frame and mounting: the one test data are observed through.
+    #[serde(flatten)]
+    pub basis: Basis,
     /// Per DH frame, the fitted [tx, ty, tz, rx, ry, rz] (zero where not kept).
     pub errors: FrameErrors,
     /// Per joint (rad/Nm; zero where not kept), `elastic` only.
@@ -764,7 +788,7 @@ impl KinematicModel {
         val: &Dataset,
         options: &KinematicOptions,
     ) -> Result<KinematicModel> {
-        let method = if elastic { "elastic" } else { "kinematic" };
+        let method = if elastic { &ELASTIC } else { &KINEMATIC };
         if train.is_empty() {
             return Err(Error::Invalid(format!("{method}: no training points")));
         }
@@ -890,18 +914,20 @@ impl KinematicModel {
             UnitQuaternion::from_scaled_axis(state.rho),
         ) * initial;
         Ok(KinematicModel {
-            method: method.to_string(),
-            joint_names: train.joint_names.clone(),
-            dh: dh.clone(),
-            registration: Registration {
-                frame: TrackerFrame {
-                    tracker_to_base: refined,
-                    mounting: state.mount,
-                    rms: train_rms,
-                    evaluations: minimum.evaluations,
+            method,
+            basis: Basis {
+                joint_names: train.joint_names.clone(),
+                dh: dh.clone(),
+                registration: Registration {
+                    frame: TrackerFrame {
+                        tracker_to_base: refined,
+                        mounting: state.mount,
+                        rms: train_rms,
+                        evaluations: minimum.evaluations,
+                    },
+                    nest: registration.nest,
+                    probe_rotation: registration.probe_rotation,
                 },
-                nest: registration.nest,
-                probe_rotation: registration.probe_rotation,
             },
             errors: state.errors.clone(),
             compliance: elastic.then(|| state.compliance.clone()),
@@ -928,7 +954,7 @@ impl KinematicModel {
     pub fn flange_pose(&self, q: &[f64]) -> Isometry3<f64> {
         let qd: Vec<f64> = match (&self.gravity, &self.compliance) {
             (Some(g), Some(c)) => g
-                .torques(&self.dh, q)
+                .torques(&self.basis.dh, q)
                 .iter()
                 .zip(c)
                 .zip(q)
@@ -936,7 +962,7 @@ impl KinematicModel {
                 .collect(),
             _ => q.to_vec(),
         };
-        ErrorFrames::new(&self.dh, &qd, &self.errors).flange
+        ErrorFrames::new(&self.basis.dh, &qd, &self.errors).flange
     }
 }
 
@@ -1050,25 +1076,17 @@ impl<'a> Identification<'a> {
 }
 
 impl Fitted for KinematicModel {
-    fn method(&self) -> &str {
-        &self.method
+    fn info(&self) -> &'static MethodInfo {
+        self.method
     }
 
-    fn registration(&self) -> &Registration {
-        &self.registration
-    }
-
-    fn joint_names(&self) -> &[String] {
-        &self.joint_names
-    }
-
-    fn dh(&self) -> &DhChain {
-        &self.dh
+    fn basis(&self) -> &Basis {
+        &self.basis
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
         let f = self.flange_pose(q);
-        let position = f * self.registration.frame.mounting;
+        let position = f * self.basis.registration.frame.mounting;
         Prediction {
             position,
             linearized_position: position,
@@ -1077,7 +1095,7 @@ impl Fitted for KinematicModel {
     }
 
     fn models_orientation(&self) -> bool {
-        self.registration.measures_orientation()
+        self.basis.registration.measures_orientation()
     }
 
     fn report(&self, test: &[Observation]) -> serde_json::Value {
@@ -1108,10 +1126,6 @@ impl Fitted for KinematicModel {
             "compliance_rad_per_nm": self.compliance,
             "values": values,
         })
-    }
-
-    fn save(&self) -> SavedModel {
-        SavedModel::Kinematic(Box::new(self.clone()))
     }
 }
 

@@ -4,6 +4,7 @@ pub mod kinematic;
 pub mod method;
 pub mod paper;
 pub mod registration;
+pub mod registry;
 pub mod regression;
 pub mod residual;
 pub mod tracker_frame;

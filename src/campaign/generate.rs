@@ -251,7 +251,8 @@ impl Setup<'_> {
         pool: Vec<CampaignPoint>,
         want: usize,
     ) -> Result<Vec<CampaignPoint>> {
-        use crate::calib::method::{FitContext, MethodKind};
+        use crate::calib::method::FitContext;
+        use crate::calib::registry::MethodKind;
         use crate::design::{DesignModel, SelectOptions, d_optimal};
         let selection = &self.config.selection;
         let in_region = |e: Error| {

@@ -175,14 +175,14 @@ impl SelectionConfig {
     }
 
     pub fn validate(&self) -> std::result::Result<(), String> {
-        use crate::calib::method::MethodKind;
+        use crate::calib::registry::MethodKind;
         let kind = MethodKind::parse(&self.model).map_err(|e| {
             format!(
                 "selection.model: {}",
                 e.to_string().replace("invalid input: ", "")
             )
         })?;
-        if matches!(kind, MethodKind::Nominal | MethodKind::ResidualRidge) {
+        if !kind.info().has_robot_parameters {
             return Err(format!(
                 "selection.model = '{}' has no robot parameters to determine; use kinematic, elastic or a \
                  paper model",
