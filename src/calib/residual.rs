@@ -29,8 +29,8 @@ use serde_json::json;
 
 use super::kinematic::{ELASTIC, KINEMATIC};
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
-use super::registration::centre;
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
+use super::rigid::centre;
 use super::tracker_frame::{Observation, Registration, fit_tracker_frame, probe_rotation};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};

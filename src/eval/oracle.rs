@@ -11,7 +11,7 @@ use nalgebra::{Point3, UnitQuaternion};
 use serde_json::json;
 
 use crate::calib::method::{Basis, Design, Fitted, MethodInfo, Prediction};
-use crate::calib::registration::{centre, register_points};
+use crate::calib::rigid::{centre, register_points};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::campaign::Simulation;
 use crate::dataset::Dataset;
