@@ -3,7 +3,7 @@
 //! that makes the calibrated model reach a target, which is what a controller is sent.
 //!
 //! What a method *is* ([`MethodInfo`]) is stated once, as a constant in the method's own file, and asked of it
-//! everywhere else; the list of methods a user can choose is [`super::registry`], which sits above every
+//! everywhere else; the list of methods a user can choose is `calib::registry`, which sits above every
 //! method. This file knows no method.
 
 use std::any::Any;
@@ -17,6 +17,7 @@ use super::regression::RegressionOptions;
 use super::tracker_frame::{Observation, Registration};
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
+use crate::robot::kinematics::joint_column;
 use crate::robot::{Chain, Payload};
 
 /// What a method is, said once next to the method (a `const` in its file) and asked of it everywhere else.
@@ -128,7 +129,7 @@ pub struct Prediction {
 }
 
 /// A fitted calibration. `Any`: the registry writes `model.json` for the model types it knows
-/// ([`super::registry::SavedModel`]).
+/// (`registry::SavedModel`).
 pub trait Fitted: Any + Send + Sync {
     /// What method this is.
     fn info(&self) -> &'static MethodInfo;
@@ -248,15 +249,16 @@ pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) 
     let frames = dh.frames(q);
     let n = dh.dof();
     let p = frames[n] * dh.tool * point_in_flange;
-    DMatrix::from_fn(6, n, |r, c| {
-        let f = &frames[c];
-        let z = f.rotation * Vector3::z();
-        let col = if dh.rows[c].prismatic {
-            [z.x, z.y, z.z, 0.0, 0.0, 0.0]
-        } else {
-            let v = z.cross(&(p - Point3::from(f.translation.vector)));
-            [v.x, v.y, v.z, z.x, z.y, z.z]
-        };
-        col[r]
-    })
+    let mut j = DMatrix::zeros(6, n);
+    for (c, f) in frames.iter().take(n).enumerate() {
+        let (lin, ang) = joint_column(
+            &(f.rotation * Vector3::z()),
+            &Point3::from(f.translation.vector),
+            &p,
+            dh.rows[c].prismatic,
+        );
+        j.fixed_view_mut::<3, 1>(0, c).copy_from(&lin);
+        j.fixed_view_mut::<3, 1>(3, c).copy_from(&ang);
+    }
+    j
 }

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
-use crate::robot::dynamics::GRAVITY;
+use crate::robot::dynamics::{GRAVITY, GravityJoint, gravity_pass};
 use crate::robot::kinematics::{Frames, forward_kinematics};
 use crate::robot::{Chain, Payload};
 
@@ -62,22 +62,20 @@ impl GravityModel {
     pub fn torques(&self, dh: &DhChain, q: &[f64]) -> Vec<f64> {
         let frames = dh.frames(q);
         let n = dh.dof();
-        let g = Vector3::from(self.gravity);
-        let flange = frames[n] * dh.tool;
-        let mut mass = self.payload.mass;
-        let mut moment = (flange * Point3::from(self.payload.com)).coords * self.payload.mass;
         let mut out = vec![0.0; n];
-        for i in (0..n).rev() {
-            mass += self.masses[i];
-            moment += (frames[i + 1] * Point3::from(self.coms[i])).coords * self.masses[i];
-            let z = frames[i].rotation * Vector3::z();
-            out[i] = if dh.rows[i].prismatic {
-                z.dot(&(g * mass))
-            } else {
-                let lever = moment - frames[i].translation.vector * mass;
-                z.dot(&lever.cross(&g))
-            };
-        }
+        gravity_pass(
+            &self.payload,
+            &(frames[n] * dh.tool),
+            &Vector3::from(self.gravity),
+            &mut out,
+            |i| GravityJoint {
+                mass: self.masses[i],
+                com: frames[i + 1] * Point3::from(self.coms[i]),
+                axis: frames[i].rotation * Vector3::z(),
+                anchor: Point3::from(frames[i].translation.vector),
+                prismatic: dh.rows[i].prismatic,
+            },
+        );
         out
     }
 }

@@ -14,11 +14,11 @@
 //! **Identifiable set.** Structural, so it cannot change with the data: the Jacobian of every candidate is
 //! stacked over a fixed set of configurations (a fixed internal seed, uniform within the joint limits), each
 //! column scaled to unit norm, and the columns are taken in the priority order above by Gram–Schmidt,
-//! keeping a column only if its part orthogonal to the ones kept before it is at least [`STRUCT_REL`].
+//! keeping a column only if its part orthogonal to the ones kept before it is at least [`STRUCT_REL`](identify::STRUCT_REL).
 //! This is QR in a fixed column order rather than with column pivoting: exactly redundant columns (e22 and
 //! e13 of the iiwa, the tracker frame and the base-side errors) have equal norms, so a pivoting QR would
 //! choose between them on rounding noise; a fixed order makes the choice a property of the robot. A column
-//! whose norm stays below [`VANISH_REL`] of the largest of its kind (geometric, or compliance) has no
+//! whose norm stays below [`VANISH_REL`](identify::VANISH_REL) of the largest of its kind (geometric, or compliance) has no
 //! measurable effect anywhere and is dropped first — the compliance of a joint whose gravity torque is
 //! structurally zero (joint 1 of a level arm, joint 7 of the iiwa with its on-axis link and payload) goes
 //! this way. The training data must then identify that whole set: the singular values of the training
@@ -31,13 +31,18 @@
 //! way with r = [`PROBE_ORIENTATION_LENGTH_M`](super::tracker_frame::PROBE_ORIENTATION_LENGTH_M).
 //!
 //! **Solver.** The `levenberg-marquardt` crate (MINPACK's `lmder`) in coordinates whitened by the starting
-//! Jacobian ([`minimize`]), from the linearized (Gauss–Newton) solution: without whitening its diagonal
+//! Jacobian ([`solve::minimize`]), from the linearized (Gauss–Newton) solution: without whitening its diagonal
 //! scaling zig-zags along the long valley that unmodelled elastic errors open in a weakly excited wrist. A fit
 //! that does not converge within [`KinematicOptions::max_evaluations`] is an error, never a silent result.
 //!
 //! **Jacobian.** Analytic and exact at the current estimate: rotation parameters (tracker frame and every e_i4–6)
-//! use SO(3)'s left Jacobian of their current value ([`so3_left_jacobian`]), so the derivative is not the
+//! use SO(3)'s left Jacobian of their current value ([`so3_left_jacobian`](super::error_model::so3_left_jacobian)), so the derivative is not the
 //! e = 0 one.
+//!
+//! **Files.** `params` (the candidates in priority order and the state they overwrite), `gravity` (gravity
+//! torques on the DH chain for the compliances), `problem` (residuals and their analytic Jacobian), `solve`
+//! (Levenberg–Marquardt in whitened coordinates), `identify` (the structural set, the rank check, the
+//! identification Jacobian for design), and here the model: its fit, prediction and report.
 
 mod gravity;
 mod identify;
