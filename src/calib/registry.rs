@@ -187,3 +187,72 @@ impl<T: Fitted> Save for T {
         (self as &dyn Fitted).save()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point3};
+
+    use super::*;
+    use crate::calib::method::Basis;
+    use crate::calib::tracker_frame::{Registration, TrackerFrame};
+    use crate::robot::dh::DhChain;
+    use crate::robot::urdf;
+
+    /// `model.json` writes the shared fields where the models wrote them before they shared a `Basis`, and
+    /// the method by its name.
+    #[test]
+    fn saved_models_keep_their_field_order() {
+        let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
+        let basis = Basis {
+            joint_names: chain.joint_names(),
+            dh: DhChain::from_chain(&chain).unwrap(),
+            registration: Registration {
+                frame: TrackerFrame {
+                    tracker_to_base: Isometry3::identity(),
+                    mounting: Point3::new(0.0, 0.0, 0.03),
+                    rms: 0.0,
+                    evaluations: 0,
+                },
+                nest: None,
+                probe_rotation: None,
+            },
+        };
+        let paper = PaperModel {
+            method: &paper::NOMINAL,
+            kind: None,
+            basis: basis.clone(),
+            candidates: Vec::new(),
+            extra_inputs: Vec::new(),
+            extra_input_means: Vec::new(),
+            position: Vec::new(),
+            orientation: Vec::new(),
+        };
+        let order = |text: &str, keys: &[&str]| {
+            let at: Vec<usize> = keys
+                .iter()
+                .map(|k| text.find(&format!("\"{k}\":")).unwrap())
+                .collect();
+            assert!(at.windows(2).all(|w| w[0] < w[1]), "{keys:?} in {text}");
+        };
+        let text = serde_json::to_string(&SavedModel::of(&paper).unwrap()).unwrap();
+        assert!(
+            text.starts_with(r#"{"model":"paper","method":"nominal","kind":null,"joint_names":"#)
+        );
+        order(
+            &text,
+            &[
+                "joint_names",
+                "dh",
+                "registration",
+                "candidates",
+                "extra_inputs",
+                "extra_input_means",
+                "position",
+                "orientation",
+            ],
+        );
+        let back: SavedModel = serde_json::from_str(&text).unwrap();
+        assert_eq!(serde_json::to_string(&back).unwrap(), text);
+        assert_eq!(back.into_fitted().method(), "nominal");
+    }
+}
