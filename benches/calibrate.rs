@@ -6,7 +6,8 @@
 
 use std::time::{Duration, Instant};
 
-use calibench::calib::method::{FitContext, MethodKind, fit};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::{MethodKind, fit};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::{Dataset, Split, random_split};
 use calibench::robot::dh::DhChain;

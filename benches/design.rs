@@ -6,7 +6,8 @@
 use std::time::{Duration, Instant};
 
 use calibench::app::simulate;
-use calibench::calib::method::{FitContext, MethodKind};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::{DistributionKind, Generator, RegionConfig};
 use calibench::design::DOptimal;
 use calibench::design::{DesignModel, SelectOptions, d_optimal};

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::calib::method::MethodKind;
+use crate::calib::registry::MethodKind;
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::eval::EvaluationConfig;
@@ -180,7 +180,7 @@ impl Scenario {
 /// A model-based layout's `selection.model` must name a method with robot parameters to determine.
 fn selection_model(name: &str) -> std::result::Result<(), String> {
     let kind = MethodKind::parse(name).map_err(|e| format!("selection.model: {}", e.detail()))?;
-    if matches!(kind, MethodKind::Nominal | MethodKind::ResidualRidge) {
+    if !kind.info().has_robot_parameters {
         return Err(format!(
             "selection.model = '{name}' has no robot parameters to determine; use kinematic, elastic or a \
              paper model"

@@ -2,7 +2,8 @@
 //! model (eq. 6) with constant error transforms, measured by a noisy tracker at an unknown pose.
 
 use calibench::calib::error_model::{FrameErrors, flange_pose_with_errors};
-use calibench::calib::method::{FitContext, MethodKind, fit};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::{MethodKind, fit};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;

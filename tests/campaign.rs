@@ -10,7 +10,7 @@ use common::{assert_clean_failure, edit, read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use calibench::calib::registration::register_points;
+use calibench::calib::rigid::register_points;
 use nalgebra::Point3;
 use serde_json::Value;
 use tempfile::TempDir;

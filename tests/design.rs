@@ -7,7 +7,8 @@ use common::edit;
 
 use calibench::app::run_study;
 use calibench::app::simulate;
-use calibench::calib::method::{FitContext, MethodKind};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::MethodKind;
 use calibench::design::{DesignModel, Indices, SelectOptions, d_optimal};
 use calibench::robot::Chain;
 use calibench::robot::dh::DhChain;

@@ -10,7 +10,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use calibench::app::simulate;
-use calibench::calib::method::{self, FitContext, Fitted, MethodKind};
+use calibench::calib::method::{FitContext, Fitted};
+use calibench::calib::registry::{self, MethodKind};
 use calibench::calib::regression::RegressionOptions;
 use calibench::campaign::Simulation;
 use calibench::eval::truth::{
@@ -121,7 +122,7 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
     };
-    let model = method::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
+    let model = registry::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
     let model = model.as_ref();
     let points = &f.truth.grid.points;
     let errors = truth_errors(model, &f.truth, points);
@@ -174,7 +175,7 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
     };
-    let nominal = method::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
+    let nominal = registry::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
     let e = closed_loop_errors(nominal.as_ref(), &f.truth, &f.sim.world.robot, points);
     assert_eq!(e.failed, 0, "{:?}", e.first_failure);
     let mean = e.position.iter().sum::<f64>() / e.position.len() as f64;

@@ -5,7 +5,8 @@ use calibench::calib::error_model::{
     ErrorModelKind, FrameErrors, error_jacobian, error_jacobian_at, flange_pose_with_errors,
 };
 use calibench::calib::kinematic::{GravityModel, KinematicModel, KinematicOptions};
-use calibench::calib::method::{FitContext, Fitted, MethodKind, SavedModel, fit};
+use calibench::calib::method::{FitContext, Fitted};
+use calibench::calib::registry::{MethodKind, Save, SavedModel, fit};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;

@@ -3,9 +3,10 @@
 //! noisy tracker at an unknown pose.
 
 use calibench::calib::error_model::{FrameErrors, flange_pose_with_errors};
-use calibench::calib::method::{FitContext, Fitted, MethodKind, SavedModel, fit};
+use calibench::calib::method::{FitContext, Fitted};
+use calibench::calib::registry::{MethodKind, Save, SavedModel, fit, fit_hybrid};
 use calibench::calib::regression::RegressionOptions;
-use calibench::calib::residual::{HybridModel, ResidualModel};
+use calibench::calib::residual::ResidualModel;
 use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;
@@ -240,7 +241,7 @@ fn hybrid_removes_most_of_the_smooth_residual_its_base_leaves() {
         let s = synthetic(&errors, field, false, 2000, 2);
         let (train, val, test) = splits(&s);
         let ctx = ctx(&s, cross);
-        let hybrid = HybridModel::fit(base, &ctx, &train, &val).unwrap();
+        let hybrid = fit_hybrid(base, &ctx, &train, &val).unwrap();
         assert_eq!(hybrid.method(), format!("hybrid-{}", base.name()));
         assert_eq!(hybrid.base().method(), base.name());
         let obs = hybrid.registration().observe(&test).unwrap();
@@ -296,7 +297,7 @@ fn hybrid_is_never_worse_than_its_base_on_the_validation_data() {
             let s = synthetic(&constant_errors(), f, false, n, 10 + seed as u64);
             let (train, val, _) = splits(&s);
             let ctx = ctx(&s, cross);
-            let hybrid = HybridModel::fit(base, &ctx, &train, &val).unwrap();
+            let hybrid = fit_hybrid(base, &ctx, &train, &val).unwrap();
             let obs = hybrid.registration().observe(&val).unwrap();
             let (b, h) = (mean_error(hybrid.base(), &obs), mean_error(&hybrid, &obs));
             let (b_rms, h_rms) = (rms_error(hybrid.base(), &obs), rms_error(&hybrid, &obs));
@@ -384,7 +385,7 @@ fn saved_models_predict_identically_after_a_json_round_trip() {
     );
     assert!(modelled < 0.5 * nominal, "{modelled} vs nominal {nominal}");
 
-    let hybrid = HybridModel::fit(MethodKind::PaperRotz, &ctx, &train, &val).unwrap();
+    let hybrid = fit_hybrid(MethodKind::PaperRotz, &ctx, &train, &val).unwrap();
     assert!(hybrid.models_orientation());
     let json = serde_json::to_value(hybrid.save()).unwrap();
     assert_eq!(json["model"], "hybrid");
@@ -419,5 +420,5 @@ fn hybrid_methods_name_their_base() {
     }
     let empty = train.subset(&[]);
     assert!(fit(MethodKind::ResidualRidge, &ctx, &train, &empty).is_err());
-    assert!(HybridModel::fit(MethodKind::Nominal, &ctx, &empty, &val).is_err());
+    assert!(fit_hybrid(MethodKind::Nominal, &ctx, &empty, &val).is_err());
 }

@@ -212,7 +212,7 @@ fn the_default_study_parses_and_covers_every_method_and_layout() {
     let scenario = Scenario::parse(DEFAULT, "scenarios/default.toml").unwrap();
     let study = scenario.study.expect("default.toml has a [study]");
     assert_eq!(study.distributions, DistributionKind::ALL.to_vec());
-    let all: Vec<&str> = calibench::calib::method::MethodKind::ALL
+    let all: Vec<&str> = calibench::calib::registry::MethodKind::ALL
         .iter()
         .map(|m| m.name())
         .collect();

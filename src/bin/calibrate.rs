@@ -18,7 +18,8 @@ use nalgebra::{Point3, UnitQuaternion};
 use serde::Serialize;
 use serde_json::json;
 
-use calibench::calib::method::{self, FitContext, Fitted, MethodKind, SavedModel};
+use calibench::calib::method::{FitContext, Fitted};
+use calibench::calib::registry::{self, MethodKind, Save, SavedModel};
 use calibench::calib::regression::RegressionOptions;
 use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::mapping::ColumnMapping;
@@ -336,7 +337,7 @@ fn fit(args: &FitArgs) -> Result<()> {
         payload,
         regression: options,
     };
-    let model = method::fit(kind, &ctx, &train, &val)?;
+    let model = registry::fit(kind, &ctx, &train, &val)?;
     let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
@@ -351,7 +352,7 @@ fn fit(args: &FitArgs) -> Result<()> {
             // "Before": the nominal kinematics, registered on the test campaign the same way.
             let nominal = match kind {
                 MethodKind::Nominal => None,
-                _ => Some(method::fit(MethodKind::Nominal, &ctx, &train, &val)?),
+                _ => Some(registry::fit(MethodKind::Nominal, &ctx, &train, &val)?),
             };
             let before = transfer::evaluate(nominal.as_deref().unwrap_or(model), t, test_mode)?;
             let obs = after.registration.observe(t)?;

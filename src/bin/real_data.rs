@@ -24,7 +24,8 @@ use rand::seq::SliceRandom;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use calibench::calib::method::{self, FitContext, MethodKind};
+use calibench::calib::method::FitContext;
+use calibench::calib::registry::{self, MethodKind};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::dataset::{Dataset, Split, random_split, random_train_val};
@@ -138,10 +139,7 @@ fn scores(test: &str, transfer: &transfer::Transfer) -> Result<Scores> {
 }
 
 fn accepts_inputs(kind: MethodKind) -> bool {
-    !matches!(
-        kind,
-        MethodKind::Nominal | MethodKind::Kinematic | MethodKind::Elastic
-    )
+    kind.info().takes_inputs
 }
 
 fn without_inputs(d: &Dataset) -> Dataset {
@@ -164,7 +162,7 @@ fn row(
     tests: &[(&str, &Dataset, TestRegistration)],
 ) -> Result<Row> {
     let started = Instant::now();
-    let model = method::fit(kind, ctx, train, val)?;
+    let model = registry::fit(kind, ctx, train, val)?;
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
     let scores = tests
         .iter()
@@ -338,7 +336,7 @@ fn run(cli: &Cli) -> Result<()> {
                         split_by(&subset, &labels, Split::Train),
                         split_by(&subset, &labels, Split::Val),
                     );
-                    let model = method::fit(kind, &ctx, &train, &val)?;
+                    let model = registry::fit(kind, &ctx, &train, &val)?;
                     let e = transfer::evaluate(model.as_ref(), &test, TestRegistration::Model)?;
                     Ok(Stats::of(&e.errors.position).map(|s| s.mean * 1e3))
                 });

@@ -478,16 +478,13 @@ impl ErrorFrames {
     /// flange.
     pub fn joint_column(&self, dh: &DhChain, j: usize, p: &Point3<f64>) -> nalgebra::Vector6<f64> {
         let f = &self.after[j];
-        let z = f.rotation * Vector3::z();
-        let mut col = nalgebra::Vector6::zeros();
-        if dh.rows[j].prismatic {
-            col.fixed_rows_mut::<3>(0).copy_from(&z);
-        } else {
-            let o = Point3::from(f.translation.vector);
-            col.fixed_rows_mut::<3>(0).copy_from(&z.cross(&(p - o)));
-            col.fixed_rows_mut::<3>(3).copy_from(&z);
-        }
-        col
+        let (lin, ang) = crate::robot::kinematics::joint_column(
+            &(f.rotation * Vector3::z()),
+            &Point3::from(f.translation.vector),
+            p,
+            dh.rows[j].prismatic,
+        );
+        nalgebra::Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
     }
 }
 

@@ -1,74 +1,97 @@
 //! One interface for every calibration method: fit on training data (validation data for hyper-parameters),
 //! predict the measured point and the flange orientation for joint angles, and invert — the joint command
 //! that makes the calibrated model reach a target, which is what a controller is sent.
+//!
+//! What a method *is* ([`MethodInfo`]) is stated once, as a constant in the method's own file, and asked of it
+//! everywhere else; the list of methods a user can choose is `calib::registry`, which sits above every
+//! method. This file knows no method.
+
+use std::any::Any;
+use std::fmt;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::kinematic::KinematicModel;
-use super::paper::PaperModel;
+use super::error_model::ErrorModelKind;
 use super::regression::RegressionOptions;
-use super::residual::{HybridModel, ResidualModel};
 use super::tracker_frame::{Observation, Registration};
-use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
+use crate::robot::kinematics::joint_column;
 use crate::robot::{Chain, Payload};
 
-/// The methods a user can fit. `oracle` is not here: it needs the truth, and only the evaluation has it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MethodKind {
-    Nominal,
-    PaperRotz,
-    PaperRotxyz,
-    PaperRotxyzTransxyz,
-    Kinematic,
-    Elastic,
-    ResidualRidge,
-    Hybrid,
-    HybridKinematic,
+/// What a method is, said once next to the method (a `const` in its file) and asked of it everywhere else.
+#[derive(Debug, PartialEq)]
+pub struct MethodInfo {
+    /// The name a user chooses it by, in files and on the command line.
+    pub name: &'static str,
+    /// One line on what it does.
+    pub summary: &'static str,
+    /// Whether it regresses on the data's inputs beyond the joint angles (e.g. `temperature`).
+    pub takes_inputs: bool,
+    /// Whether it identifies parameters of the robot (a campaign can then be designed to determine them).
+    pub has_robot_parameters: bool,
+    /// A hybrid's base method: the one whose prediction it corrects.
+    pub base: Option<&'static MethodInfo>,
+    /// The model a campaign for this method is designed for.
+    pub design: Design,
 }
 
-impl MethodKind {
-    pub const ALL: [MethodKind; 9] = [
-        MethodKind::Nominal,
-        MethodKind::PaperRotz,
-        MethodKind::PaperRotxyz,
-        MethodKind::PaperRotxyzTransxyz,
-        MethodKind::Kinematic,
-        MethodKind::Elastic,
-        MethodKind::ResidualRidge,
-        MethodKind::Hybrid,
-        MethodKind::HybridKinematic,
-    ];
+/// The model a method's points are designed for ([`crate::design`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Design {
+    /// No parameters of the robot to determine.
+    None,
+    /// The error parameters of one of the paper's error models.
+    ErrorModel(ErrorModelKind),
+    /// The structurally identifiable set of the kinematic fit, with compliances when `elastic`.
+    Identification { elastic: bool },
+}
 
-    pub fn name(self) -> &'static str {
-        match self {
-            MethodKind::Nominal => "nominal",
-            MethodKind::PaperRotz => "paper-rotz",
-            MethodKind::PaperRotxyz => "paper-rotxyz",
-            MethodKind::PaperRotxyzTransxyz => "paper-rotxyz-transxyz",
-            MethodKind::Kinematic => "kinematic",
-            MethodKind::Elastic => "elastic",
-            MethodKind::ResidualRidge => "residual-ridge",
-            MethodKind::Hybrid => "hybrid",
-            MethodKind::HybridKinematic => "hybrid-kinematic",
-        }
+impl fmt::Display for MethodInfo {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name)
     }
+}
 
-    pub fn parse(name: &str) -> Result<MethodKind> {
-        MethodKind::ALL
-            .into_iter()
-            .find(|m| m.name() == name)
+/// A method is written to files by its name.
+impl Serialize for MethodInfo {
+    fn serialize<S: Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name)
+    }
+}
+
+impl MethodInfo {
+    /// Reads a method's name from a file, as one of `methods` (those a model type can be).
+    pub fn deserialize_among<'de, D: Deserializer<'de>>(
+        deserializer: D,
+        methods: &[&'static MethodInfo],
+    ) -> std::result::Result<&'static MethodInfo, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        methods
+            .iter()
+            .copied()
+            .find(|m| m.name == name)
             .ok_or_else(|| {
-                let names: Vec<&str> = MethodKind::ALL.iter().map(|m| m.name()).collect();
-                Error::Invalid(format!(
-                    "unknown method '{name}'; choose one of {}",
+                let names: Vec<&str> = methods.iter().map(|m| m.name).collect();
+                serde::de::Error::custom(format!(
+                    "method '{name}' is not one of {}",
                     names.join(", ")
                 ))
             })
     }
+}
+
+/// What every fitted model holds besides its own parameters: the robot's joints, the nominal kinematics it
+/// corrects and the registration its data are observed through. A model's file writes these fields in its
+/// own object (`#[serde(flatten)]`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Basis {
+    /// The robot's joints, in the order of `q`.
+    pub joint_names: Vec<String>,
+    /// The nominal kinematics the method corrects (DH form of the robot's URDF).
+    pub dh: DhChain,
+    pub registration: Registration,
 }
 
 /// What a method may know besides the data: the nominal robot as its maker describes it.
@@ -105,14 +128,27 @@ pub struct Prediction {
     pub orientation: UnitQuaternion<f64>,
 }
 
-/// A fitted calibration.
-pub trait Fitted: Send + Sync {
-    fn method(&self) -> &str;
-    fn registration(&self) -> &Registration;
+/// A fitted calibration. `Any`: the registry writes `model.json` for the model types it knows
+/// (`registry::SavedModel`).
+pub trait Fitted: Any + Send + Sync {
+    /// What method this is.
+    fn info(&self) -> &'static MethodInfo;
+    /// What every model holds: joints, nominal kinematics, registration.
+    fn basis(&self) -> &Basis;
+    fn method(&self) -> &str {
+        self.info().name
+    }
+    fn registration(&self) -> &Registration {
+        &self.basis().registration
+    }
     /// The robot's joints, in the order of `q`.
-    fn joint_names(&self) -> &[String];
+    fn joint_names(&self) -> &[String] {
+        &self.basis().joint_names
+    }
     /// The nominal kinematics the method corrects.
-    fn dh(&self) -> &DhChain;
+    fn dh(&self) -> &DhChain {
+        &self.basis().dh
+    }
     /// The prediction at `q`; a method that regresses on extra inputs ([`Fitted::input_names`]) takes them at
     /// their training means.
     fn predict(&self, q: &[f64]) -> Prediction;
@@ -145,8 +181,6 @@ pub trait Fitted: Send + Sync {
     /// Method-specific facts for `report.json` (kept parameters, R², rank, condition number…), given the
     /// test observations.
     fn report(&self, test: &[Observation]) -> serde_json::Value;
-    /// What `model.json` holds.
-    fn save(&self) -> SavedModel;
 
     /// The nominal model's measured point and flange orientation: what the controller believes.
     fn nominal(&self, q: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
@@ -215,70 +249,16 @@ pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) 
     let frames = dh.frames(q);
     let n = dh.dof();
     let p = frames[n] * dh.tool * point_in_flange;
-    DMatrix::from_fn(6, n, |r, c| {
-        let f = &frames[c];
-        let z = f.rotation * Vector3::z();
-        let col = if dh.rows[c].prismatic {
-            [z.x, z.y, z.z, 0.0, 0.0, 0.0]
-        } else {
-            let v = z.cross(&(p - Point3::from(f.translation.vector)));
-            [v.x, v.y, v.z, z.x, z.y, z.z]
-        };
-        col[r]
-    })
-}
-
-/// `model.json`: any fitted method, tagged by kind, so `calibrate apply` can load what `calibrate` saved.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(tag = "model", rename_all = "kebab-case")]
-pub enum SavedModel {
-    Paper(PaperModel),
-    Kinematic(Box<KinematicModel>),
-    Residual(ResidualModel),
-    Hybrid(HybridModel),
-}
-
-impl SavedModel {
-    pub fn into_fitted(self) -> Box<dyn Fitted> {
-        match self {
-            SavedModel::Paper(m) => Box::new(m),
-            SavedModel::Kinematic(m) => m,
-            SavedModel::Residual(m) => Box::new(m),
-            SavedModel::Hybrid(m) => Box::new(m.into_fitted()),
-        }
+    let mut j = DMatrix::zeros(6, n);
+    for (c, f) in frames.iter().take(n).enumerate() {
+        let (lin, ang) = joint_column(
+            &(f.rotation * Vector3::z()),
+            &Point3::from(f.translation.vector),
+            &p,
+            dh.rows[c].prismatic,
+        );
+        j.fixed_view_mut::<3, 1>(0, c).copy_from(&lin);
+        j.fixed_view_mut::<3, 1>(3, c).copy_from(&ang);
     }
-}
-
-/// Fits `kind` on `train`, with `val` for its hyper-parameters.
-pub fn fit(
-    kind: MethodKind,
-    ctx: &FitContext,
-    train: &Dataset,
-    val: &Dataset,
-) -> Result<Box<dyn Fitted>> {
-    use super::error_model::ErrorModelKind as E;
-    let paper = |k: Option<E>| -> Result<Box<dyn Fitted>> {
-        Ok(Box::new(PaperModel::fit(k, ctx, train, val)?))
-    };
-    match kind {
-        MethodKind::Nominal => paper(None),
-        MethodKind::PaperRotz => paper(Some(E::RotZ)),
-        MethodKind::PaperRotxyz => paper(Some(E::RotXyz)),
-        MethodKind::PaperRotxyzTransxyz => paper(Some(E::RotXyzTransXyz)),
-        MethodKind::Kinematic => Ok(Box::new(KinematicModel::fit(false, ctx, train, val)?)),
-        MethodKind::Elastic => Ok(Box::new(KinematicModel::fit(true, ctx, train, val)?)),
-        MethodKind::ResidualRidge => Ok(Box::new(ResidualModel::fit(ctx, train, val)?)),
-        MethodKind::Hybrid => Ok(Box::new(HybridModel::fit(
-            MethodKind::Elastic,
-            ctx,
-            train,
-            val,
-        )?)),
-        MethodKind::HybridKinematic => Ok(Box::new(HybridModel::fit(
-            MethodKind::Kinematic,
-            ctx,
-            train,
-            val,
-        )?)),
-    }
+    j
 }

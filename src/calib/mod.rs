@@ -1,9 +1,39 @@
-//! Calibration methods. Registration first; the paper's method follows (issue 3).
+//! Calibration methods: register the tracker frame, fit a model of the robot's errors, predict and invert.
+//!
+//! **Layering** (each file imports only files above it in this list; none imports the registry but the stages
+//! that choose a method):
+//!
+//! 1. `rigid` (point-set registration by SVD), `regression` (ridge models and their selection),
+//!    `error_model` (the paper's error parameters on the DH chain) — no other file of calib;
+//! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
+//!    — `rigid`;
+//! 3. `method` (the `Fitted` trait, `MethodInfo` — what a method is —, `Basis`, `FitContext`) — `tracker_frame`,
+//!    `regression`, `error_model`; it knows no method;
+//! 4. the methods, one file (or directory) each: `paper` (`nominal` and the paper's three), `kinematic/`
+//!    (`kinematic`, `elastic`), `residual` (`residual-ridge`, and the hybrids, which are given their fitted base
+//!    and name it by the `MethodInfo` constants of `kinematic`) — `method` and the files above;
+//! 5. `registry` (`MethodKind`, `fit`, `SavedModel`: the list of methods and `model.json`) — everything above.
+//!
+//! **Adding a method touches 3 places**, none of them a string or `matches!` outside the method's own file
+//! and the registry:
+//!
+//! 1. its own file: the model, its `impl Fitted` and its `const …: MethodInfo` (name, summary, whether it takes
+//!    extra inputs, whether it has robot parameters, its base if it is a hybrid, its design model);
+//! 2. `calib/mod.rs`: `pub mod …;`;
+//! 3. `calib/registry.rs`: the `MethodKind` variant, its place in `MethodKind::ALL`, its arms in
+//!    `MethodKind::info` and `fit` (the compiler asks for both), and for a new model type a `SavedModel`
+//!    variant with its arms in `SavedModel::of` and `into_fitted` (the first is a downcast the compiler does not
+//!    check: a forgotten type makes `save()` panic with the method's name).
+//!
+//! Everything else asks the descriptor (`MethodKind::info()`): the selection's check that a method has robot
+//! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base
+//! (`report::summary`), the model a campaign is designed for (`design::model`).
 pub mod error_model;
 pub mod kinematic;
 pub mod method;
 pub mod paper;
-pub mod registration;
+pub mod registry;
 pub mod regression;
 pub mod residual;
+pub mod rigid;
 pub mod tracker_frame;

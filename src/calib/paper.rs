@@ -18,12 +18,11 @@ use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
     select_params,
 };
-use super::method::{FitContext, Fitted, Prediction, SavedModel};
+use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::regression::{RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::robot::dh::DhChain;
 
 /// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
 /// paper's indistinguishable parameters (eq. 14–16, 22) make `J_e` rank-deficient by construction.
@@ -36,16 +35,60 @@ pub struct ParameterModel {
     pub model: RidgeModel,
 }
 
+pub const NOMINAL: MethodInfo = MethodInfo {
+    name: "nominal",
+    summary: "the nominal model on the registered tracker frame and mounting (the paper's \"Measured\")",
+    takes_inputs: false,
+    has_robot_parameters: false,
+    base: None,
+    design: Design::None,
+};
+
+pub const PAPER_ROTZ: MethodInfo = paper_method("paper-rotz", ErrorModelKind::RotZ);
+pub const PAPER_ROTXYZ: MethodInfo = paper_method("paper-rotxyz", ErrorModelKind::RotXyz);
+pub const PAPER_ROTXYZ_TRANSXYZ: MethodInfo =
+    paper_method("paper-rotxyz-transxyz", ErrorModelKind::RotXyzTransXyz);
+
+/// The paper's method with one of its error models.
+const fn paper_method(name: &'static str, kind: ErrorModelKind) -> MethodInfo {
+    MethodInfo {
+        name,
+        summary: "the paper's error parameters, each a ridge regression on the configuration (and extra inputs)",
+        takes_inputs: true,
+        has_robot_parameters: true,
+        base: None,
+        design: Design::ErrorModel(kind),
+    }
+}
+
+/// The method of error model `kind`; `None`: `nominal`.
+pub fn info_of(kind: Option<ErrorModelKind>) -> &'static MethodInfo {
+    match kind {
+        None => &NOMINAL,
+        Some(ErrorModelKind::RotZ) => &PAPER_ROTZ,
+        Some(ErrorModelKind::RotXyz) => &PAPER_ROTXYZ,
+        Some(ErrorModelKind::RotXyzTransXyz) => &PAPER_ROTXYZ_TRANSXYZ,
+    }
+}
+
+fn method_from_name<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<&'static MethodInfo, D::Error> {
+    MethodInfo::deserialize_among(
+        d,
+        &[&NOMINAL, &PAPER_ROTZ, &PAPER_ROTXYZ, &PAPER_ROTXYZ_TRANSXYZ],
+    )
+}
+
 /// Everything a later run needs to predict: `model.json`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PaperModel {
     /// `nominal` or `paper-rotz` / `paper-rotxyz` / `paper-rotxyz-transxyz`.
-    pub method: String,
+    #[serde(deserialize_with = "method_from_name")]
+    pub method: &'static MethodInfo,
     pub kind: Option<ErrorModelKind>,
-    pub joint_names: Vec<String>,
-    /// The nominal kinematics the model corrects (DH form of the robot's URDF).
-    pub dh: DhChain,
-    pub registration: Registration,
+    #[serde(flatten)]
+    pub basis: Basis,
     /// Names of the regression's candidate inputs: the joint angles (rad), the nominal TCP x, y, z (m), then
     /// the data's extra inputs (`extra_inputs`).
     pub candidates: Vec<String>,
@@ -64,15 +107,6 @@ pub struct PaperModel {
 pub struct Identified {
     pub position: Vec<Vec<f64>>,
     pub orientation: Vec<Vec<f64>>,
-}
-
-fn method_name(kind: Option<ErrorModelKind>) -> &'static str {
-    match kind {
-        None => "nominal",
-        Some(ErrorModelKind::RotZ) => "paper-rotz",
-        Some(ErrorModelKind::RotXyz) => "paper-rotxyz",
-        Some(ErrorModelKind::RotXyzTransXyz) => "paper-rotxyz-transxyz",
-    }
 }
 
 impl PaperModel {
@@ -109,11 +143,13 @@ impl PaperModel {
             })
             .collect();
         let mut model = PaperModel {
-            method: method_name(kind).to_string(),
+            method: info_of(kind),
             kind,
-            joint_names: train.joint_names.clone(),
-            dh: dh.clone(),
-            registration,
+            basis: Basis {
+                joint_names: train.joint_names.clone(),
+                dh: dh.clone(),
+                registration,
+            },
             candidates: train
                 .joint_names
                 .iter()
@@ -140,17 +176,17 @@ impl PaperModel {
                 train.len(),
                 3 * train.len(),
                 selection.position.len(),
-                method_name(Some(kind))
+                info_of(Some(kind)).name
             )));
         }
-        let orientation_params = if model.registration.measures_orientation() {
+        let orientation_params = if model.basis.registration.measures_orientation() {
             selection.orientation_only.clone()
         } else {
             Vec::new()
         };
         let (obs_train, obs_val) = (
-            model.registration.observe(train)?,
-            model.registration.observe(val)?,
+            model.basis.registration.observe(train)?,
+            model.basis.registration.observe(val)?,
         );
         let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
         let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
@@ -205,23 +241,23 @@ impl PaperModel {
             orientation: Vec::with_capacity(observations.len()),
         };
         for o in observations {
-            let flange = self.dh.flange_pose(&o.q);
+            let flange = self.basis.dh.flange_pose(&o.q);
             if !position_params.is_empty() {
                 let j = error_jacobian(
-                    &self.dh,
+                    &self.basis.dh,
                     &o.q,
-                    &self.registration.frame.mounting,
+                    &self.basis.registration.frame.mounting,
                     position_params,
                 );
-                let dp = o.position - flange * self.registration.frame.mounting;
+                let dp = o.position - flange * self.basis.registration.frame.mounting;
                 id.position
                     .push(min_norm(j.fixed_rows::<3>(0).into_owned(), dp));
             }
             if let (false, Some(measured)) = (orientation_params.is_empty(), o.orientation) {
                 let j = error_jacobian(
-                    &self.dh,
+                    &self.basis.dh,
                     &o.q,
-                    &self.registration.frame.mounting,
+                    &self.basis.registration.frame.mounting,
                     orientation_params,
                 );
                 // The relative rotation, in the base frame, is what J_e linearizes; eq. 25's difference of
@@ -246,7 +282,7 @@ impl PaperModel {
     /// `inputs`: the extra inputs in `extra_inputs` order; any other length (empty) stands for their
     /// training means.
     fn candidates_of(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
-        let tcp = self.dh.flange_pose(q) * self.registration.frame.mounting;
+        let tcp = self.basis.dh.flange_pose(q) * self.basis.registration.frame.mounting;
         let extra = if inputs.len() == self.extra_inputs.len() {
             inputs
         } else {
@@ -273,25 +309,35 @@ impl PaperModel {
 
     fn frame_errors_of(&self, models: &[ParameterModel], values: &[f64]) -> FrameErrors {
         let params: Vec<ErrorParam> = models.iter().map(|m| m.param).collect();
-        frame_errors(self.dh.dof(), &params, values)
+        frame_errors(self.basis.dh.dof(), &params, values)
     }
 
     /// Predicted measured point and flange orientation for configuration `q` and extra inputs `inputs`.
     fn prediction(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let (ep, eo) = self.parameters_with(q, inputs);
-        let nominal = self.dh.flange_pose(q);
-        let position =
-            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.position, &ep))
-                * self.registration.frame.mounting;
-        let orientation =
-            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.orientation, &eo))
-                .rotation;
+        let nominal = self.basis.dh.flange_pose(q);
+        let position = flange_pose_with_errors(
+            &self.basis.dh,
+            q,
+            &self.frame_errors_of(&self.position, &ep),
+        ) * self.basis.registration.frame.mounting;
+        let orientation = flange_pose_with_errors(
+            &self.basis.dh,
+            q,
+            &self.frame_errors_of(&self.orientation, &eo),
+        )
+        .rotation;
         let linearized_position = if self.position.is_empty() {
-            nominal * self.registration.frame.mounting
+            nominal * self.basis.registration.frame.mounting
         } else {
             let params: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
-            let j = error_jacobian(&self.dh, q, &self.registration.frame.mounting, &params);
-            nominal * self.registration.frame.mounting
+            let j = error_jacobian(
+                &self.basis.dh,
+                q,
+                &self.basis.registration.frame.mounting,
+                &params,
+            );
+            nominal * self.basis.registration.frame.mounting
                 + j.fixed_rows::<3>(0) * DVector::from_vec(ep)
         };
         Prediction {
@@ -315,20 +361,12 @@ fn j_cols(svd: &nalgebra::SVD<f64, nalgebra::U3, nalgebra::Dyn>) -> usize {
 }
 
 impl Fitted for PaperModel {
-    fn method(&self) -> &str {
-        &self.method
+    fn info(&self) -> &'static MethodInfo {
+        self.method
     }
 
-    fn registration(&self) -> &Registration {
-        &self.registration
-    }
-
-    fn joint_names(&self) -> &[String] {
-        &self.joint_names
-    }
-
-    fn dh(&self) -> &DhChain {
-        &self.dh
+    fn basis(&self) -> &Basis {
+        &self.basis
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
@@ -347,15 +385,21 @@ impl Fitted for PaperModel {
     /// rigid), so a point elsewhere on the flange moves with them.
     fn predicted_flange(&self, q: &[f64], inputs: &[f64]) -> nalgebra::Isometry3<f64> {
         let (ep, eo) = self.parameters_with(q, inputs);
-        let position =
-            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.position, &ep));
+        let position = flange_pose_with_errors(
+            &self.basis.dh,
+            q,
+            &self.frame_errors_of(&self.position, &ep),
+        );
         if self.orientation.is_empty() {
             return position;
         }
-        let rotation =
-            flange_pose_with_errors(&self.dh, q, &self.frame_errors_of(&self.orientation, &eo))
-                .rotation;
-        let m = self.registration.frame.mounting;
+        let rotation = flange_pose_with_errors(
+            &self.basis.dh,
+            q,
+            &self.frame_errors_of(&self.orientation, &eo),
+        )
+        .rotation;
+        let m = self.basis.registration.frame.mounting;
         nalgebra::Isometry3::from_parts(
             nalgebra::Translation3::from((position * m).coords - rotation * m.coords),
             rotation,
@@ -401,9 +445,5 @@ impl Fitted for PaperModel {
             },
             "r2": r2s,
         })
-    }
-
-    fn save(&self) -> SavedModel {
-        SavedModel::Paper(self.clone())
     }
 }

@@ -292,7 +292,7 @@ impl Design {
 
     /// Validation residuals `y_val − ŷ` of a fitted structure; only the few structures that compete for the
     /// final choice need them.
-    fn val_residuals(&self, target: &Target, f: &Fitted) -> Vec<f64> {
+    fn val_residuals(&self, target: &Target, f: &RidgeFit) -> Vec<f64> {
         let idx = self.feature_indices(&f.inputs, f.degree);
         (0..self.f_val.nrows())
             .map(|r| {
@@ -516,7 +516,7 @@ fn check_inputs(
 }
 
 /// The winner among the α of one structure.
-struct Fitted {
+struct RidgeFit {
     inputs: Vec<usize>,
     degree: usize,
     n_features: usize,
@@ -586,7 +586,7 @@ fn fit_one(
                 }
             }
             let (alpha, w, sse) = best.expect("alphas is non-empty");
-            fitted.push(Fitted {
+            fitted.push(RidgeFit {
                 inputs: inputs.to_vec(),
                 degree,
                 n_features: idx.len(),

@@ -27,13 +27,49 @@ use nalgebra::{DMatrix, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::method::{FitContext, Fitted, MethodKind, Prediction, SavedModel, fit};
-use super::registration::centre;
+use super::kinematic::{ELASTIC, KINEMATIC};
+use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
+use super::rigid::centre;
 use super::tracker_frame::{Observation, Registration, fit_tracker_frame, probe_rotation};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
+
+pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
+    name: "residual-ridge",
+    summary: "the nominal prediction plus ridge models of its residual on the joint angles (and extra inputs)",
+    takes_inputs: true,
+    has_robot_parameters: false,
+    base: None,
+    design: Design::None,
+};
+
+pub const HYBRID: MethodInfo = hybrid("hybrid", &ELASTIC);
+pub const HYBRID_KINEMATIC: MethodInfo = hybrid("hybrid-kinematic", &KINEMATIC);
+
+/// A hybrid on a base that has no hybrid of its own above (tests build them on every method). It is named
+/// `hybrid-<base>` ([`HybridModel::method`]); what else it is depends on the base, which this cannot say.
+pub const HYBRID_ON_OTHER_BASE: MethodInfo = MethodInfo {
+    name: "hybrid-<base>",
+    summary: "a base method's prediction plus ridge models of its residual",
+    takes_inputs: true,
+    has_robot_parameters: false,
+    base: None,
+    design: Design::None,
+};
+
+/// The hybrid on `base`: its residual is data-driven, its parameters and design model are the base's.
+const fn hybrid(name: &'static str, base: &'static MethodInfo) -> MethodInfo {
+    MethodInfo {
+        name,
+        summary: "a base method's prediction plus ridge models of its residual",
+        takes_inputs: true,
+        has_robot_parameters: base.has_robot_parameters,
+        base: Some(base),
+        design: base.design,
+    }
+}
 
 /// `residual-ridge` alternates registration and residual model at most this many rounds, and stops once
 /// `STALLED_ROUNDS` rounds in a row lowered the mean validation error by less than `ROUND_GAIN` (relative).
@@ -359,16 +395,14 @@ fn check_sets(method: &str, train: &Dataset, val: &Dataset) -> Result<()> {
 /// alongside (module notes).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResidualModel {
-    pub joint_names: Vec<String>,
-    /// The nominal kinematics the model corrects.
-    pub dh: DhChain,
-    pub registration: Registration,
+    #[serde(flatten)]
+    pub basis: Basis,
     pub residual: ResidualCorrection,
 }
 
 impl ResidualModel {
     pub fn fit(ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<ResidualModel> {
-        check_sets(MethodKind::ResidualRidge.name(), train, val)?;
+        check_sets(RESIDUAL_RIDGE.name, train, val)?;
         let mut registration = Registration::fit(ctx.dh, train, val)?;
         let centres: Vec<Point3<f64>> = train
             .measured
@@ -403,9 +437,11 @@ impl ResidualModel {
                 &ctx.regression,
             )?;
             let model = ResidualModel {
-                joint_names: train.joint_names.clone(),
-                dh: ctx.dh.clone(),
-                registration: registration.clone(),
+                basis: Basis {
+                    joint_names: train.joint_names.clone(),
+                    dh: ctx.dh.clone(),
+                    registration: registration.clone(),
+                },
                 residual,
             };
             let error = mean(
@@ -440,7 +476,7 @@ impl ResidualModel {
     }
 
     fn reference(&self, q: &[f64]) -> Reference {
-        nominal_reference(&self.dh, &self.registration, q)
+        nominal_reference(&self.basis.dh, &self.basis.registration, q)
     }
 }
 
@@ -450,20 +486,12 @@ fn nominal_reference(dh: &DhChain, registration: &Registration, q: &[f64]) -> Re
 }
 
 impl Fitted for ResidualModel {
-    fn method(&self) -> &str {
-        MethodKind::ResidualRidge.name()
+    fn info(&self) -> &'static MethodInfo {
+        &RESIDUAL_RIDGE
     }
 
-    fn registration(&self) -> &Registration {
-        &self.registration
-    }
-
-    fn joint_names(&self) -> &[String] {
-        &self.joint_names
-    }
-
-    fn dh(&self) -> &DhChain {
-        &self.dh
+    fn basis(&self) -> &Basis {
+        &self.basis
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
@@ -490,43 +518,53 @@ impl Fitted for ResidualModel {
     fn report(&self, test: &[Observation]) -> serde_json::Value {
         json!({ "residual": self.residual.report(&|q| self.reference(q), test) })
     }
-
-    fn save(&self) -> SavedModel {
-        SavedModel::Residual(self.clone())
-    }
 }
 
-/// `hybrid`: a base method's prediction plus a ridge model of its residual. This is what `model.json` holds;
-/// [`HybridModel::into_fitted`] rebuilds the base to predict with.
+/// `hybrid`: a base method's prediction plus a ridge model of its residual. This and the base's saved model
+/// are what `model.json` holds.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct HybridModel {
     /// `hybrid` (elastic base), `hybrid-kinematic`, or `hybrid-<base>` for any other base.
     pub method: String,
-    pub base: Box<SavedModel>,
     pub residual: ResidualCorrection,
 }
 
 /// A [`HybridModel`] with its base ready to predict.
 pub struct HybridFitted {
     saved: HybridModel,
+    info: &'static MethodInfo,
     base: Box<dyn Fitted>,
 }
 
+/// The hybrids that have a name of their own; any other base's is `hybrid-<base>`.
+const NAMED: [&MethodInfo; 2] = [&HYBRID, &HYBRID_KINEMATIC];
+
 impl HybridModel {
-    /// Fits `base` on `train` and `val`, then the residual of its predictions.
+    /// The hybrid on `base`: its description and name.
+    fn on_base(base: &MethodInfo) -> (&'static MethodInfo, String) {
+        match NAMED
+            .into_iter()
+            .find(|h| h.base.is_some_and(|b| b.name == base.name))
+        {
+            Some(h) => (h, h.name.to_string()),
+            None => (&HYBRID_ON_OTHER_BASE, format!("hybrid-{}", base.name)),
+        }
+    }
+
+    /// The hybrid's check of the training and validation sets, before its base is fitted on them.
+    pub fn check_sets(base: &MethodInfo, train: &Dataset, val: &Dataset) -> Result<()> {
+        check_sets(&HybridModel::on_base(base).1, train, val)
+    }
+
+    /// Fits the residual of `base`'s predictions (the base fitted on the same `train` and `val`).
     pub fn fit(
-        base: MethodKind,
+        base: Box<dyn Fitted>,
         ctx: &FitContext,
         train: &Dataset,
         val: &Dataset,
     ) -> Result<HybridFitted> {
-        let method = match base {
-            MethodKind::Elastic => MethodKind::Hybrid.name().to_string(),
-            MethodKind::Kinematic => MethodKind::HybridKinematic.name().to_string(),
-            other => format!("hybrid-{}", other.name()),
-        };
+        let method = HybridModel::on_base(base.info()).1;
         check_sets(&method, train, val)?;
-        let base = fit(base, ctx, train, val)?;
         let registration = base.registration();
         let (obs_train, obs_val) = (registration.observe(train)?, registration.observe(val)?);
         let reference = |q: &[f64]| base_reference(base.as_ref(), q);
@@ -540,19 +578,16 @@ impl HybridModel {
             registration.measures_orientation(),
             &ctx.regression,
         )?;
-        Ok(HybridFitted {
-            saved: HybridModel {
-                method,
-                base: Box::new(base.save()),
-                residual,
-            },
-            base,
-        })
+        Ok(HybridModel { method, residual }.on(base))
     }
 
-    pub fn into_fitted(self) -> HybridFitted {
-        let base = self.base.clone().into_fitted();
-        HybridFitted { saved: self, base }
+    /// This residual model on `base` (the one it was fitted against).
+    pub fn on(self, base: Box<dyn Fitted>) -> HybridFitted {
+        HybridFitted {
+            info: HybridModel::on_base(base.info()).0,
+            saved: self,
+            base,
+        }
     }
 }
 
@@ -572,20 +607,18 @@ impl HybridFitted {
 }
 
 impl Fitted for HybridFitted {
+    fn info(&self) -> &'static MethodInfo {
+        self.info
+    }
+
+    /// The base's: the residual is modelled on the base's registration.
+    fn basis(&self) -> &Basis {
+        self.base.basis()
+    }
+
+    /// The name it was fitted under: `hybrid-<base>` on a base without a hybrid of its own.
     fn method(&self) -> &str {
         &self.saved.method
-    }
-
-    fn registration(&self) -> &Registration {
-        self.base.registration()
-    }
-
-    fn joint_names(&self) -> &[String] {
-        self.base.joint_names()
-    }
-
-    fn dh(&self) -> &DhChain {
-        self.base.dh()
     }
 
     fn predict(&self, q: &[f64]) -> Prediction {
@@ -624,9 +657,5 @@ impl Fitted for HybridFitted {
                 .residual
                 .report(&|q| base_reference(self.base.as_ref(), q), test),
         })
-    }
-
-    fn save(&self) -> SavedModel {
-        SavedModel::Hybrid(self.saved.clone())
     }
 }

@@ -19,7 +19,7 @@ use nalgebra::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::registration::{centre, register_points};
+use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;

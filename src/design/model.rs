@@ -22,8 +22,9 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::calib::error_model::{ErrorModelKind, ErrorParam, error_jacobian, select_params};
 use crate::calib::kinematic::Identification;
-use crate::calib::method::{FitContext, MethodKind};
-use crate::calib::registration::centre;
+use crate::calib::method::{Design, FitContext};
+use crate::calib::registry::MethodKind;
+use crate::calib::rigid::centre;
 use crate::error::{Error, Result};
 use crate::robot::chain::sample_within;
 use crate::robot::dh::DhChain;
@@ -89,19 +90,18 @@ impl<'a> DesignModel<'a> {
                 point: mount,
             }
         };
-        let (method, basis) = match method {
-            MethodKind::Nominal | MethodKind::ResidualRidge => return Ok(None),
-            MethodKind::PaperRotz => (method, paper(ErrorModelKind::RotZ)),
-            MethodKind::PaperRotxyz => (method, paper(ErrorModelKind::RotXyz)),
-            MethodKind::PaperRotxyzTransxyz => (method, paper(ErrorModelKind::RotXyzTransXyz)),
-            MethodKind::Kinematic | MethodKind::HybridKinematic => (
-                MethodKind::Kinematic,
-                Basis::Kinematic(Box::new(Identification::new(false, ctx, mount, length)?)),
-            ),
-            MethodKind::Elastic | MethodKind::Hybrid => (
-                MethodKind::Elastic,
-                Basis::Kinematic(Box::new(Identification::new(true, ctx, mount, length)?)),
-            ),
+        let info = method.info();
+        let basis = match info.design {
+            Design::None => return Ok(None),
+            Design::ErrorModel(kind) => paper(kind),
+            Design::Identification { elastic } => {
+                Basis::Kinematic(Box::new(Identification::new(elastic, ctx, mount, length)?))
+            }
+        };
+        // A hybrid's parameters are its base's.
+        let method = match info.base {
+            Some(base) => MethodKind::parse(base.name)?,
+            None => method,
         };
         let names = match &basis {
             Basis::Kinematic(id) => id.params().iter().map(|p| p.name()).collect(),

@@ -9,7 +9,7 @@ use nalgebra::Point3;
 use serde::Serialize;
 
 use super::stats::Stats;
-use crate::calib::registration::{centre, register_points};
+use crate::calib::rigid::{centre, register_points};
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 use crate::robot::Chain;

@@ -7,7 +7,7 @@ pub mod stats;
 pub mod transfer;
 pub mod truth;
 
-pub use crate::calib::registration::centre;
+pub use crate::calib::rigid::centre;
 pub use budget::{Budget, measured, registered_distances};
 pub use oracle::Oracle;
 pub use stats::Stats;

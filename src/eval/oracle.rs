@@ -1,6 +1,6 @@
 //! The oracle: a "calibration" that is the true robot itself. It predicts what a perfect tracker would
 //! measure, so its error on measured data is the measurement noise alone. It needs the truth, so only the
-//! evaluation can build it; it is not a [`MethodKind`](crate::calib::method::MethodKind).
+//! evaluation can build it; it is not a [`MethodKind`](crate::calib::registry::MethodKind).
 //!
 //! The evaluation's oracle registers the tracker frame from the same noisy training measurements as every
 //! method ([`Oracle::registered_on`]): its ground-truth error is then what perfect knowledge of the robot
@@ -10,13 +10,11 @@
 use nalgebra::{Point3, UnitQuaternion};
 use serde_json::json;
 
-use crate::calib::method::{Fitted, Prediction, SavedModel};
-use crate::calib::paper::PaperModel;
-use crate::calib::registration::{centre, register_points};
+use crate::calib::method::{Basis, Design, Fitted, MethodInfo, Prediction};
+use crate::calib::rigid::{centre, register_points};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
 use crate::error::Result;
-use crate::robot::dh::DhChain;
 use crate::tracker::reflector::Mounting;
 use crate::truth::{TrueRobot, TrueState};
 use crate::world::World;
@@ -25,9 +23,7 @@ use crate::world::World;
 /// tracker's true pose, the mounting is the true measured point (reflector, or nest centre) on the flange.
 pub struct Oracle {
     robot: TrueRobot,
-    joint_names: Vec<String>,
-    dh: DhChain,
-    registration: Registration,
+    basis: Basis,
     /// The true rotation of the nest from its drawing (identity for a single reflector): the measured
     /// orientation of a nest is the flange's turned by it.
     nest_rotation: UnitQuaternion<f64>,
@@ -47,17 +43,19 @@ impl Oracle {
         let nest_rotation = nest_rotation(mounting)?.unwrap_or_else(UnitQuaternion::identity);
         Ok(Oracle {
             robot: world.robot.clone(),
-            joint_names: world.nominal.joint_names(),
-            dh: world.dh.clone(),
-            registration: Registration {
-                frame: TrackerFrame {
-                    tracker_to_base: world.tracker.pose,
-                    mounting: centre(&mounting.actual),
-                    rms: 0.0,
-                    evaluations: 0,
+            basis: Basis {
+                joint_names: world.nominal.joint_names(),
+                dh: world.dh.clone(),
+                registration: Registration {
+                    frame: TrackerFrame {
+                        tracker_to_base: world.tracker.pose,
+                        mounting: centre(&mounting.actual),
+                        rms: 0.0,
+                        evaluations: 0,
+                    },
+                    nest,
+                    probe_rotation: None,
                 },
-                nest,
-                probe_rotation: None,
             },
             nest_rotation,
         })
@@ -74,8 +72,8 @@ impl Oracle {
             }
         }
         let fit = register_points(&measured, &predicted)?;
-        self.registration.frame.tracker_to_base = fit.transform;
-        self.registration.frame.rms = fit.rms;
+        self.basis.registration.frame.tracker_to_base = fit.transform;
+        self.basis.registration.frame.rms = fit.rms;
         Ok(self)
     }
 
@@ -99,21 +97,23 @@ pub fn nest_rotation(mounting: &Mounting) -> Result<Option<UnitQuaternion<f64>>>
     Ok(Some(fit.transform.rotation))
 }
 
+/// The oracle as a method: not one a user can choose, as it is the truth.
+pub const ORACLE: MethodInfo = MethodInfo {
+    name: "oracle",
+    summary: "the true robot, noise-free: the measurement-noise floor",
+    takes_inputs: false,
+    has_robot_parameters: false,
+    base: None,
+    design: Design::None,
+};
+
 impl Fitted for Oracle {
-    fn method(&self) -> &str {
-        "oracle"
+    fn info(&self) -> &'static MethodInfo {
+        &ORACLE
     }
 
-    fn registration(&self) -> &Registration {
-        &self.registration
-    }
-
-    fn joint_names(&self) -> &[String] {
-        &self.joint_names
-    }
-
-    fn dh(&self) -> &DhChain {
-        &self.dh
+    fn basis(&self) -> &Basis {
+        &self.basis
     }
 
     /// The true arm at `q`, noise-free, with the fixed-point deflection (a scenario solving its deflection
@@ -123,7 +123,7 @@ impl Fitted for Oracle {
         let mut state = TrueState::new(&self.robot);
         match self.robot.flange_pose(q, &mut state) {
             Ok(flange) => {
-                let position = flange * self.registration.frame.mounting;
+                let position = flange * self.basis.registration.frame.mounting;
                 Prediction {
                     position,
                     linearized_position: position,
@@ -142,27 +142,10 @@ impl Fitted for Oracle {
     }
 
     fn models_orientation(&self) -> bool {
-        self.registration.measures_orientation()
+        self.basis.registration.measures_orientation()
     }
 
     fn report(&self, _test: &[Observation]) -> serde_json::Value {
         json!({ "oracle": "the true robot, noise-free: the measurement-noise floor" })
-    }
-
-    /// The truth is not a model a user could have: what can be saved is the oracle's registration (the true
-    /// tracker pose and mounting) on the nominal kinematics.
-    fn save(&self) -> SavedModel {
-        SavedModel::Paper(PaperModel {
-            method: "nominal".into(),
-            kind: None,
-            joint_names: self.joint_names.clone(),
-            dh: self.dh.clone(),
-            registration: self.registration.clone(),
-            candidates: Vec::new(),
-            extra_inputs: Vec::new(),
-            extra_input_means: Vec::new(),
-            position: Vec::new(),
-            orientation: Vec::new(),
-        })
     }
 }

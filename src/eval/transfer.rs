@@ -24,7 +24,7 @@ use serde::Serialize;
 
 use super::truth::Errors;
 use crate::calib::method::Fitted;
-use crate::calib::registration::centre;
+use crate::calib::rigid::centre;
 use crate::calib::tracker_frame::{
     Registration, fit_tracker_frame, fit_tracker_frame_along, probe_rotation, turning_directions,
 };

@@ -22,7 +22,8 @@ use serde::{Deserialize, Serialize};
 
 use super::oracle::{Oracle, nest_rotation};
 use super::stats::Stats;
-use crate::calib::method::{self, FitContext, Fitted, MethodKind};
+use crate::calib::method::{FitContext, Fitted};
+use crate::calib::registry::{self, MethodKind};
 use crate::calib::regression::RegressionOptions;
 use crate::campaign::generate::{GROUND_TRUTH_ATTEMPT, TruePoint};
 use crate::campaign::{
@@ -573,7 +574,7 @@ pub fn evaluate(
     let mut methods: Vec<MethodReport> = kinds
         .par_iter()
         .map(|&kind| {
-            method::fit(kind, &ctx, &train, &val)
+            registry::fit(kind, &ctx, &train, &val)
                 .and_then(|model| evaluate_method(model.as_ref(), &test, &truth, &world.robot))
                 .unwrap_or_else(|e| MethodReport::failed(kind.name(), &e))
         })

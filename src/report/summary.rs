@@ -288,11 +288,11 @@ fn verdict(
 /// The method whose parameters a method's observability describes, when another listed method has the same
 /// ones (a hybrid and its base): its rows would repeat that method's.
 fn same_model_as(method: &str) -> Option<&'static str> {
-    match method {
-        "hybrid" => Some("elastic"),
-        "hybrid-kinematic" => Some("kinematic"),
-        _ => None,
-    }
+    crate::calib::registry::MethodKind::parse(method)
+        .ok()?
+        .info()
+        .base
+        .map(|b| b.name)
 }
 
 /// One cell of the observability table: medians of O1, O3 and logdet over the successful seeds.

@@ -1,6 +1,6 @@
 //! Static dynamics: gravity torques and potential energy of a chain carrying a payload.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::chain::{Chain, JointKind, Payload};
 use super::kinematics::Frames;
@@ -24,20 +24,50 @@ pub fn gravity_torques(
         chain.dof(),
         "output length must equal the chain's dof"
     );
-    let n = chain.dof();
-    let mut mass = payload.mass;
-    let mut moment = (frames.flange * Point3::from(payload.com)).coords * payload.mass;
-    for i in (0..n).rev() {
+    gravity_pass(payload, &frames.flange, gravity, out, |i| {
         let body = &chain.bodies[i + 1];
-        mass += body.inertial.mass;
-        moment += (frames.body[i + 1] * body.inertial.com).coords * body.inertial.mass;
-        let z = frames.axis(chain, i);
-        out[i] = match chain.joints[i].kind {
-            JointKind::Revolute => {
-                let lever = moment - frames.anchor(i).coords * mass;
-                z.dot(&lever.cross(gravity))
-            }
-            JointKind::Prismatic => z.dot(&(gravity * mass)),
+        GravityJoint {
+            mass: body.inertial.mass,
+            com: frames.body[i + 1] * body.inertial.com,
+            axis: frames.axis(chain, i),
+            anchor: frames.anchor(i),
+            prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
+        }
+    });
+}
+
+/// Joint `i`'s part in [`gravity_pass`]: the body it moves (mass, world centre of mass) and its world axis
+/// through `anchor`.
+pub struct GravityJoint {
+    pub mass: f64,
+    pub com: Point3<f64>,
+    pub axis: Vector3<f64>,
+    pub anchor: Point3<f64>,
+    pub prismatic: bool,
+}
+
+/// The backward pass behind every gravity torque here, of the URDF chain ([`gravity_torques`]) and of the DH
+/// chain (the elastic model's [`crate::calib::kinematic::GravityModel`]): the payload at the `flange`, then
+/// joint by joint from the last (`joint(i)`), the mass and first moment of everything beyond joint `i` is all
+/// that joint feels. Fills `out` (one value per joint).
+pub fn gravity_pass(
+    payload: &Payload,
+    flange: &Isometry3<f64>,
+    gravity: &Vector3<f64>,
+    out: &mut [f64],
+    joint: impl Fn(usize) -> GravityJoint,
+) {
+    let mut mass = payload.mass;
+    let mut moment = (flange * Point3::from(payload.com)).coords * payload.mass;
+    for i in (0..out.len()).rev() {
+        let j = joint(i);
+        mass += j.mass;
+        moment += j.com.coords * j.mass;
+        out[i] = if j.prismatic {
+            j.axis.dot(&(gravity * mass))
+        } else {
+            let lever = moment - j.anchor.coords * mass;
+            j.axis.dot(&lever.cross(gravity))
         };
     }
 }

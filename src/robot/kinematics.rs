@@ -83,13 +83,28 @@ pub fn point_jacobian_into(
     jac: &mut Matrix6xX<f64>,
 ) {
     for i in 0..chain.dof() {
-        let z = frames.axis(chain, i);
-        let (lin, ang) = match chain.joints[i].kind {
-            JointKind::Revolute => (z.cross(&(point - frames.anchor(i))), z),
-            JointKind::Prismatic => (z, Vector3::zeros()),
-        };
+        let prismatic = matches!(chain.joints[i].kind, JointKind::Prismatic);
+        let (lin, ang) = joint_column(&frames.axis(chain, i), &frames.anchor(i), point, prismatic);
         jac.fixed_view_mut::<3, 1>(0, i).copy_from(&lin);
         jac.fixed_view_mut::<3, 1>(3, i).copy_from(&ang);
+    }
+}
+
+/// One column of a geometric Jacobian: the velocity of the world point `point` moved by a joint at unit rate,
+/// and the angular velocity, for the joint of world axis `axis` through `anchor`. The one formula behind every
+/// Jacobian here, of the URDF chain ([`point_jacobian`]) and of the DH chain
+/// ([`crate::calib::method::nominal_jacobian`], the error model's chain).
+#[inline]
+pub fn joint_column(
+    axis: &Vector3<f64>,
+    anchor: &Point3<f64>,
+    point: &Point3<f64>,
+    prismatic: bool,
+) -> (Vector3<f64>, Vector3<f64>) {
+    if prismatic {
+        (*axis, Vector3::zeros())
+    } else {
+        (axis.cross(&(point - anchor)), *axis)
     }
 }
 

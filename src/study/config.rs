@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::calib::method::MethodKind;
+use crate::calib::registry::MethodKind;
 use crate::campaign::{DistributionKind, RegionConfig};
 use crate::eval::truth::{EvaluationConfig, ORACLE};
 

@@ -27,7 +27,8 @@ use super::{
     BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
     StudyResult,
 };
-use crate::calib::method::{self, FitContext, Fitted, MethodKind};
+use crate::calib::method::{FitContext, Fitted};
+use crate::calib::registry::{self, MethodKind};
 use crate::campaign::{Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig};
 use crate::dataset::Dataset;
 use crate::design::{DOptimal, DesignModel, Indices};
@@ -445,7 +446,7 @@ impl Shared<'_> {
         detail_job: bool,
     ) -> Outcome {
         let started = Instant::now();
-        let fitted = method::fit(self.kinds[m], &self.ctx, train, val);
+        let fitted = registry::fit(self.kinds[m], &self.ctx, train, val);
         let fit_ms = started.elapsed().as_secs_f64() * 1e3;
         let model = match fitted {
             Ok(model) => model,
@@ -590,7 +591,7 @@ impl Shared<'_> {
         val: &Dataset,
         outcomes: &[Outcome],
     ) -> Option<Detail> {
-        let nominal = method::fit(MethodKind::Nominal, &self.ctx, train, val).ok()?;
+        let nominal = registry::fit(MethodKind::Nominal, &self.ctx, train, val).ok()?;
         let sets = &self.regions[job.region];
         let truth = &sets.truth;
         let before_test = test_errors(nominal.as_ref(), &sets.test).ok()?.position;

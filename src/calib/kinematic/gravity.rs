@@ -1,0 +1,81 @@
+//! Gravity torques on the nominal DH chain, for the elastic model's deflections.
+
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::robot::dh::DhChain;
+use crate::robot::dynamics::{GRAVITY, GravityJoint, gravity_pass};
+use crate::robot::kinematics::{Frames, forward_kinematics};
+use crate::robot::{Chain, Payload};
+
+/// The nominal inertials re-expressed in the DH frames, so gravity torques need only the DH chain (and the
+/// saved model needs no URDF): body j + 1 (moved by joint j) in DH frame j + 1, the payload in the flange frame.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct GravityModel {
+    /// Per moving body: mass (kg) and centre of mass in its DH frame (m).
+    pub masses: Vec<f64>,
+    pub coms: Vec<[f64; 3]>,
+    pub payload: Payload,
+    pub gravity: [f64; 3],
+}
+
+impl GravityModel {
+    pub fn new(chain: &Chain, dh: &DhChain, payload: Payload) -> Result<GravityModel> {
+        let n = chain.dof();
+        if dh.dof() != n {
+            return Err(Error::Invalid(format!(
+                "the DH chain has {} joints, the URDF chain {n}",
+                dh.dof()
+            )));
+        }
+        if !(payload.mass.is_finite() && payload.mass >= 0.0)
+            || payload.com.iter().any(|c| !c.is_finite())
+        {
+            return Err(Error::Invalid(format!(
+                "payload {payload:?} must be finite, mass ≥ 0"
+            )));
+        }
+        let q0 = vec![0.0; n];
+        let mut fk = Frames::new(chain);
+        forward_kinematics(chain, &q0, &mut fk);
+        let dh_frames = dh.frames(&q0);
+        let mut masses = Vec::with_capacity(n);
+        let mut coms = Vec::with_capacity(n);
+        for i in 0..n {
+            let body = &chain.bodies[i + 1];
+            let com = dh_frames[i + 1].inverse() * (fk.body[i + 1] * body.inertial.com);
+            masses.push(body.inertial.mass);
+            coms.push([com.x, com.y, com.z]);
+        }
+        // The payload's centre is given in the chain's flange frame, which is the DH chain's (tool) flange.
+        Ok(GravityModel {
+            masses,
+            coms,
+            payload,
+            gravity: [GRAVITY.x, GRAVITY.y, GRAVITY.z],
+        })
+    }
+
+    /// Gravity torques (Nm; N for a prismatic joint) at `q` of the nominal DH chain, as
+    /// [`crate::robot::dynamics::gravity_torques`] gives them on the URDF chain.
+    pub fn torques(&self, dh: &DhChain, q: &[f64]) -> Vec<f64> {
+        let frames = dh.frames(q);
+        let n = dh.dof();
+        let mut out = vec![0.0; n];
+        gravity_pass(
+            &self.payload,
+            &(frames[n] * dh.tool),
+            &Vector3::from(self.gravity),
+            &mut out,
+            |i| GravityJoint {
+                mass: self.masses[i],
+                com: frames[i + 1] * Point3::from(self.coms[i]),
+                axis: frames[i].rotation * Vector3::z(),
+                anchor: Point3::from(frames[i].translation.vector),
+                prismatic: dh.rows[i].prismatic,
+            },
+        );
+        out
+    }
+}

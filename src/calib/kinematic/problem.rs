@@ -1,0 +1,228 @@
+//! The least-squares problem shared by the structural analysis, the rank check and Levenberg–Marquardt: the
+//! residuals of the measured points and their analytic Jacobian at the current estimate.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Point3, UnitQuaternion, Vector3, Vector6};
+
+use super::params::{Param, State};
+use crate::calib::error_model::{ErrorFrames, so3_left_jacobian};
+use crate::robot::dh::DhChain;
+
+/// What the model knows about each fitted point.
+pub(super) struct Point {
+    pub(super) q: Vec<f64>,
+    /// The measured point, base frame of the initial registration.
+    pub(super) y: Point3<f64>,
+    /// The measured flange orientation, same frame (nests).
+    pub(super) orientation: Option<UnitQuaternion<f64>>,
+    /// Gravity torques at the commanded angles (elastic only; empty otherwise).
+    pub(super) tau: Vec<f64>,
+}
+
+/// The problem shared by the structural analysis, the rank check and Levenberg–Marquardt.
+pub(super) struct Problem<'a> {
+    pub(super) dh: &'a DhChain,
+    pub(super) points: Vec<Point>,
+    /// Rotation residual weight (m/rad), `Some` when orientations are fitted.
+    pub(super) length: Option<f64>,
+    pub(super) base: State,
+    pub(super) params: Vec<Param>,
+}
+
+impl Problem<'_> {
+    pub(super) fn rows(&self) -> usize {
+        self.points
+            .iter()
+            .map(|p| if self.fits_rotation(p) { 6 } else { 3 })
+            .sum()
+    }
+
+    fn fits_rotation(&self, p: &Point) -> bool {
+        self.length.is_some() && p.orientation.is_some()
+    }
+
+    /// Residuals (predicted − measured) and, when asked, the Jacobian, at `values` of the kept parameters.
+    pub(super) fn evaluate(
+        &self,
+        values: &[f64],
+        jacobian: bool,
+    ) -> (DVector<f64>, Option<DMatrix<f64>>) {
+        let s = State::with(&self.base, &self.params, values);
+        let m = self.rows();
+        let mut r = DVector::zeros(m);
+        let mut j = jacobian.then(|| DMatrix::zeros(m, self.params.len()));
+        let rot = UnitQuaternion::from_scaled_axis(s.rho);
+        let jl_rho = so3_left_jacobian(&s.rho);
+        // Per frame, the left Jacobian of its rotation error (it does not depend on the configuration), and
+        // per point the world axes of each frame's translation and rotation errors and the rotation centre.
+        let jl_errors: Vec<Matrix3<f64>> = s
+            .errors
+            .iter()
+            .map(|e| so3_left_jacobian(&Vector3::new(e[3], e[4], e[5])))
+            .collect();
+        let mut axes: Vec<(Matrix3<f64>, Matrix3<f64>, Point3<f64>)> =
+            vec![(Matrix3::zeros(), Matrix3::zeros(), Point3::origin()); s.errors.len()];
+        let mut row = 0;
+        for pt in &self.points {
+            let qd = s.deflected(&pt.q, &pt.tau);
+            let frames = ErrorFrames::new(self.dh, &qd, &s.errors);
+            if j.is_some() {
+                for (i, ((g, e), jl)) in frames
+                    .before
+                    .iter()
+                    .zip(&s.errors)
+                    .zip(&jl_errors)
+                    .enumerate()
+                {
+                    let r = g.rotation.to_rotation_matrix().into_inner();
+                    axes[i] = (r, r * jl, g * Point3::new(e[0], e[1], e[2]));
+                }
+            }
+            let p = frames.flange * s.mount;
+            let v = rot * pt.y.coords;
+            r.fixed_rows_mut::<3>(row).copy_from(&(p.coords - v - s.t));
+            // Rotation residual and the map of a world rotation of the flange (or of the measurement) into it.
+            let rotation = match (self.length, pt.orientation) {
+                (Some(l), Some(meas)) => {
+                    let measured = rot * meas;
+                    let phi = (frames.flange.rotation * measured.inverse()).scaled_axis();
+                    r.fixed_rows_mut::<3>(row + 3).copy_from(&(phi * l));
+                    let inv = |m: Matrix3<f64>| m.try_inverse().unwrap_or_else(Matrix3::identity);
+                    Some((
+                        l,
+                        inv(so3_left_jacobian(&phi)),
+                        inv(so3_left_jacobian(&-phi)),
+                    ))
+                }
+                _ => None,
+            };
+            if let Some(jm) = j.as_mut() {
+                for (c, prm) in self.params.iter().enumerate() {
+                    let col: Vector6<f64> = match *prm {
+                        Param::TrackerRotation(k) => {
+                            let lin = v.cross_matrix() * jl_rho.column(k);
+                            let ang = match &rotation {
+                                Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
+                                None => Vector3::zeros(),
+                            };
+                            stack(&lin, &ang)
+                        }
+                        Param::TrackerTranslation(k) => {
+                            stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
+                        }
+                        Param::Mounting(k) => stack(
+                            &(frames.flange.rotation * Vector3::ith(k, 1.0)),
+                            &Vector3::zeros(),
+                        ),
+                        Param::Error(e) => {
+                            let (r, u, centre) = &axes[e.frame - 1];
+                            let k = (e.component - 1) % 3;
+                            let col = if e.component <= 3 {
+                                stack(&r.column(k).into_owned(), &Vector3::zeros())
+                            } else {
+                                let u = u.column(k).into_owned();
+                                stack(&u.cross(&(p - centre)), &u)
+                            };
+                            flange_column(col, &rotation)
+                        }
+                        Param::Compliance(jt) => flange_column(
+                            frames.joint_column(self.dh, jt, &p) * pt.tau[jt],
+                            &rotation,
+                        ),
+                    };
+                    let rows = if rotation.is_some() { 6 } else { 3 };
+                    for k in 0..rows {
+                        jm[(row + k, c)] = col[k];
+                    }
+                }
+            }
+            row += if rotation.is_some() { 6 } else { 3 };
+        }
+        (r, j)
+    }
+}
+
+fn stack(lin: &Vector3<f64>, ang: &Vector3<f64>) -> Vector6<f64> {
+    Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
+}
+
+/// A column of the flange's [linear; world angular] motion as residual rows: the angular part mapped through
+/// the rotation residual's inverse left Jacobian and weighted.
+fn flange_column(
+    col: Vector6<f64>,
+    rotation: &Option<(f64, Matrix3<f64>, Matrix3<f64>)>,
+) -> Vector6<f64> {
+    match rotation {
+        Some((l, jl_inv, _)) => {
+            let ang = jl_inv * col.fixed_rows::<3>(3) * *l;
+            stack(&col.fixed_rows::<3>(0).into_owned(), &ang)
+        }
+        None => col,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::kinematic::gravity::GravityModel;
+    use crate::calib::kinematic::params::candidates;
+    use crate::robot::Payload;
+    use crate::robot::urdf;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The analytic Jacobian of every candidate, at a state far from zero (so the e = 0 formulas would be
+    /// wrong), against central differences of the residuals; position and nest orientation rows, compliances.
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
+        let dh = DhChain::from_chain(&chain).unwrap();
+        let gravity = GravityModel::new(&chain, &dh, Payload::NONE).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let points: Vec<Point> = (0..6)
+            .map(|i| {
+                let q: Vec<f64> = chain
+                    .joints
+                    .iter()
+                    .map(|j| rng.random_range(j.lower..j.upper))
+                    .collect();
+                let f = dh.flange_pose(&q);
+                Point {
+                    y: f * Point3::new(0.01, 0.02, 0.05),
+                    orientation: (i % 2 == 0)
+                        .then(|| UnitQuaternion::from_euler_angles(0.01, 0.02, 0.03) * f.rotation),
+                    tau: gravity.torques(&dh, &q),
+                    q,
+                }
+            })
+            .collect();
+        let params = candidates(7, true);
+        let setup = Problem {
+            dh: &dh,
+            points,
+            length: Some(0.05),
+            base: State::initial(7, Point3::new(0.0, 0.0, 0.03)),
+            params: params.clone(),
+        };
+        let x: Vec<f64> = params
+            .iter()
+            .map(|p| match p {
+                Param::Compliance(_) => rng.random_range(1e-4..1e-3),
+                Param::Mounting(k) => [0.01, 0.02, 0.05][*k],
+                _ => rng.random_range(-0.05..0.05),
+            })
+            .collect();
+        let (_, j) = setup.evaluate(&x, true);
+        let j = j.unwrap();
+        for (c, p) in params.iter().enumerate() {
+            let h = if p.is_compliance() { 1e-8 } else { 1e-6 };
+            let at = |d: f64| {
+                let mut xs = x.clone();
+                xs[c] += d;
+                setup.evaluate(&xs, false).0
+            };
+            let fd = (at(h) - at(-h)) / (2.0 * h);
+            let err = (j.column(c) - &fd).norm() / (1.0 + fd.norm());
+            assert!(err < 1e-6, "{}: off by {err:e}", p.name());
+        }
+    }
+}

@@ -1,0 +1,258 @@
+//! The methods a user can choose, and `model.json`: the one place that lists every method. It sits above the
+//! methods' files (each of which knows only [`super::method`]); nothing in calib below it imports it.
+//!
+//! What a method is ([`MethodInfo`]: whether it takes extra inputs, has robot parameters, its base, its design
+//! model) is not said here: [`MethodKind::info`] points to the constant in the method's own file.
+
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::error_model::ErrorModelKind;
+use super::kinematic::{self, KinematicModel};
+use super::method::{FitContext, Fitted, MethodInfo};
+use super::paper::{self, PaperModel};
+use super::residual::{self, HybridFitted, HybridModel, ResidualCorrection, ResidualModel};
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+
+/// The methods a user can fit. `oracle` is not here: it needs the truth, and only the evaluation has it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    Nominal,
+    PaperRotz,
+    PaperRotxyz,
+    PaperRotxyzTransxyz,
+    Kinematic,
+    Elastic,
+    ResidualRidge,
+    Hybrid,
+    HybridKinematic,
+}
+
+impl MethodKind {
+    pub const ALL: [MethodKind; 9] = [
+        MethodKind::Nominal,
+        MethodKind::PaperRotz,
+        MethodKind::PaperRotxyz,
+        MethodKind::PaperRotxyzTransxyz,
+        MethodKind::Kinematic,
+        MethodKind::Elastic,
+        MethodKind::ResidualRidge,
+        MethodKind::Hybrid,
+        MethodKind::HybridKinematic,
+    ];
+
+    /// What the method is, as its own file states it.
+    pub fn info(self) -> &'static MethodInfo {
+        match self {
+            MethodKind::Nominal => &paper::NOMINAL,
+            MethodKind::PaperRotz => &paper::PAPER_ROTZ,
+            MethodKind::PaperRotxyz => &paper::PAPER_ROTXYZ,
+            MethodKind::PaperRotxyzTransxyz => &paper::PAPER_ROTXYZ_TRANSXYZ,
+            MethodKind::Kinematic => &kinematic::KINEMATIC,
+            MethodKind::Elastic => &kinematic::ELASTIC,
+            MethodKind::ResidualRidge => &residual::RESIDUAL_RIDGE,
+            MethodKind::Hybrid => &residual::HYBRID,
+            MethodKind::HybridKinematic => &residual::HYBRID_KINEMATIC,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        self.info().name
+    }
+
+    pub fn parse(name: &str) -> Result<MethodKind> {
+        MethodKind::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .ok_or_else(|| {
+                let names: Vec<&str> = MethodKind::ALL.iter().map(|m| m.name()).collect();
+                Error::Invalid(format!(
+                    "unknown method '{name}'; choose one of {}",
+                    names.join(", ")
+                ))
+            })
+    }
+}
+
+/// Fits `kind` on `train`, with `val` for its hyper-parameters.
+pub fn fit(
+    kind: MethodKind,
+    ctx: &FitContext,
+    train: &Dataset,
+    val: &Dataset,
+) -> Result<Box<dyn Fitted>> {
+    use ErrorModelKind as E;
+    Ok(match kind {
+        MethodKind::Nominal => Box::new(PaperModel::fit(None, ctx, train, val)?),
+        MethodKind::PaperRotz => Box::new(PaperModel::fit(Some(E::RotZ), ctx, train, val)?),
+        MethodKind::PaperRotxyz => Box::new(PaperModel::fit(Some(E::RotXyz), ctx, train, val)?),
+        MethodKind::PaperRotxyzTransxyz => {
+            Box::new(PaperModel::fit(Some(E::RotXyzTransXyz), ctx, train, val)?)
+        }
+        MethodKind::Kinematic => Box::new(KinematicModel::fit(false, ctx, train, val)?),
+        MethodKind::Elastic => Box::new(KinematicModel::fit(true, ctx, train, val)?),
+        MethodKind::ResidualRidge => Box::new(ResidualModel::fit(ctx, train, val)?),
+        MethodKind::Hybrid | MethodKind::HybridKinematic => {
+            let base = kind.info().base.expect("a hybrid names its base");
+            Box::new(fit_hybrid(MethodKind::parse(base.name)?, ctx, train, val)?)
+        }
+    })
+}
+
+/// A hybrid on `base`: fits the base, then gives it to [`HybridModel::fit`]. The hybrid's own check of the
+/// sets runs first, so a hybrid on too few points fails under its own name.
+pub fn fit_hybrid(
+    base: MethodKind,
+    ctx: &FitContext,
+    train: &Dataset,
+    val: &Dataset,
+) -> Result<HybridFitted> {
+    HybridModel::check_sets(base.info(), train, val)?;
+    HybridModel::fit(fit(base, ctx, train, val)?, ctx, train, val)
+}
+
+/// `model.json`: any fitted method, tagged by its model type, so `calibrate apply` can load what `calibrate`
+/// saved.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "kebab-case")]
+pub enum SavedModel {
+    Paper(PaperModel),
+    Kinematic(Box<KinematicModel>),
+    Residual(ResidualModel),
+    Hybrid(SavedHybrid),
+}
+
+/// A hybrid in `model.json`: its name, its base's saved model and the residual model.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SavedHybrid {
+    pub method: String,
+    pub base: Box<SavedModel>,
+    pub residual: ResidualCorrection,
+}
+
+impl SavedModel {
+    /// What `model.json` holds for `model`; `None` for a model type it does not hold (the oracle).
+    pub fn of(model: &dyn Fitted) -> Option<SavedModel> {
+        let any: &dyn Any = model;
+        if let Some(m) = any.downcast_ref::<PaperModel>() {
+            return Some(SavedModel::Paper(m.clone()));
+        }
+        if let Some(m) = any.downcast_ref::<KinematicModel>() {
+            return Some(SavedModel::Kinematic(Box::new(m.clone())));
+        }
+        if let Some(m) = any.downcast_ref::<ResidualModel>() {
+            return Some(SavedModel::Residual(m.clone()));
+        }
+        let h = any.downcast_ref::<HybridFitted>()?;
+        Some(SavedModel::Hybrid(SavedHybrid {
+            method: h.model().method.clone(),
+            base: Box::new(SavedModel::of(h.base())?),
+            residual: h.model().residual.clone(),
+        }))
+    }
+
+    pub fn into_fitted(self) -> Box<dyn Fitted> {
+        match self {
+            SavedModel::Paper(m) => Box::new(m),
+            SavedModel::Kinematic(m) => m,
+            SavedModel::Residual(m) => Box::new(m),
+            SavedModel::Hybrid(h) => Box::new(
+                HybridModel {
+                    method: h.method,
+                    residual: h.residual,
+                }
+                .on(h.base.into_fitted()),
+            ),
+        }
+    }
+}
+
+/// `model.save()`: what `model.json` holds, for any model of a type it holds (see [`SavedModel::of`]).
+pub trait Save {
+    fn save(&self) -> SavedModel;
+}
+
+impl Save for dyn Fitted {
+    fn save(&self) -> SavedModel {
+        SavedModel::of(self)
+            .unwrap_or_else(|| panic!("{}: model.json does not hold this model", self.method()))
+    }
+}
+
+impl<T: Fitted> Save for T {
+    fn save(&self) -> SavedModel {
+        (self as &dyn Fitted).save()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point3};
+
+    use super::*;
+    use crate::calib::method::Basis;
+    use crate::calib::tracker_frame::{Registration, TrackerFrame};
+    use crate::robot::dh::DhChain;
+    use crate::robot::urdf;
+
+    /// `model.json` writes the shared fields where the models wrote them before they shared a `Basis`, and
+    /// the method by its name.
+    #[test]
+    fn saved_models_keep_their_field_order() {
+        let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
+        let basis = Basis {
+            joint_names: chain.joint_names(),
+            dh: DhChain::from_chain(&chain).unwrap(),
+            registration: Registration {
+                frame: TrackerFrame {
+                    tracker_to_base: Isometry3::identity(),
+                    mounting: Point3::new(0.0, 0.0, 0.03),
+                    rms: 0.0,
+                    evaluations: 0,
+                },
+                nest: None,
+                probe_rotation: None,
+            },
+        };
+        let paper = PaperModel {
+            method: &paper::NOMINAL,
+            kind: None,
+            basis: basis.clone(),
+            candidates: Vec::new(),
+            extra_inputs: Vec::new(),
+            extra_input_means: Vec::new(),
+            position: Vec::new(),
+            orientation: Vec::new(),
+        };
+        let order = |text: &str, keys: &[&str]| {
+            let at: Vec<usize> = keys
+                .iter()
+                .map(|k| text.find(&format!("\"{k}\":")).unwrap())
+                .collect();
+            assert!(at.windows(2).all(|w| w[0] < w[1]), "{keys:?} in {text}");
+        };
+        let text = serde_json::to_string(&SavedModel::of(&paper).unwrap()).unwrap();
+        assert!(
+            text.starts_with(r#"{"model":"paper","method":"nominal","kind":null,"joint_names":"#)
+        );
+        order(
+            &text,
+            &[
+                "joint_names",
+                "dh",
+                "registration",
+                "candidates",
+                "extra_inputs",
+                "extra_input_means",
+                "position",
+                "orientation",
+            ],
+        );
+        let back: SavedModel = serde_json::from_str(&text).unwrap();
+        assert_eq!(serde_json::to_string(&back).unwrap(), text);
+        assert_eq!(back.into_fitted().method(), "nominal");
+    }
+}
