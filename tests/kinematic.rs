@@ -290,7 +290,7 @@ fn the_saved_model_predicts_the_same() {
     let ctx = context(&s.chain, &s.dh, PAYLOAD);
     for kind in [MethodKind::Kinematic, MethodKind::Elastic] {
         let model = fit(kind, &ctx, &train, &val).unwrap();
-        let json = serde_json::to_string(&model.save()).unwrap();
+        let json = serde_json::to_string(&model.save().unwrap()).unwrap();
         let back = serde_json::from_str::<SavedModel>(&json)
             .unwrap()
             .into_fitted();

@@ -19,6 +19,8 @@ use calibench::calib::tracker_frame::Registration;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::dataset::{Dataset, Split, random_train_val};
 use calibench::eval::Stats;
+use calibench::eval::protocol::{self, TestSet};
+use calibench::eval::split::SplitRule;
 use calibench::eval::transfer::{self, TestRegistration};
 use calibench::robot::dh::DhChain;
 use calibench::robot::{Chain, urdf};
@@ -333,6 +335,69 @@ fn the_readme_c_to_d_numbers_reproduce() {
     }
     // elastic beats the constant-parameter kinematic calibration by 28 % of its mean error.
     assert!(means[2] < 0.72 * means[1], "{means:?}");
+}
+
+/// The same C → D means through the real-data protocol called as a library function (what `real_data` prints
+/// and writes, without its process): the split, the title, the re-registration and the three README means.
+#[test]
+fn the_protocol_reproduces_the_readme_c_to_d_means() {
+    let chain = ur10();
+    let dh = DhChain::from_chain(&chain).unwrap();
+    let m = mapping();
+    let c = m.read(&series("C"), &chain).unwrap();
+    let d = m.read(&series("D"), &chain).unwrap();
+    let ctx = FitContext::new(&chain, &dh);
+    let rule = SplitRule::default();
+    let methods = [
+        MethodKind::Nominal,
+        MethodKind::Kinematic,
+        MethodKind::Elastic,
+    ];
+    let tests = [TestSet {
+        name: "D",
+        data: &d,
+        registration: TestRegistration::Refit,
+    }];
+    let table = protocol::across(&methods, &ctx, &rule, ("C", &c), &tests).unwrap();
+    assert_eq!(
+        table.title,
+        "Trained on series C (1849 training + 924 validation points), tested on series D (632 points)"
+    );
+    // None of the three regresses on the temperature: one row each, on the joint angles alone.
+    assert_eq!(table.rows.len(), 3);
+    for (row, (method, readme_mm)) in table.rows.iter().zip([
+        ("nominal", 0.7207630),
+        ("kinematic", 0.6945264),
+        ("elastic", 0.4990876),
+    ]) {
+        assert_eq!(row.method, method);
+        assert!(row.inputs.is_empty(), "{method}: {:?}", row.inputs);
+        let s = &row.scores[0];
+        assert_eq!((s.test.as_str(), s.n), ("D", 632));
+        let mean = s.position_mm.mean;
+        assert!(
+            (mean - readme_mm).abs() < 1e-6,
+            "{method}: C → D mean {mean:.9} mm through the protocol, the README says {readme_mm}"
+        );
+        assert!(
+            s.fitted_on_test.contains("along the 2 of 3 directions"),
+            "{}",
+            s.fitted_on_test
+        );
+        assert_eq!(s.orientation_mrad.map(|o| o.n), Some(632));
+    }
+    // The learning curve refuses a size outside its pool before fitting anything.
+    let parts = rule.apply(&c, false).unwrap();
+    assert_eq!(
+        (parts.train.len(), parts.val.len(), parts.test.len()),
+        (1387, 693, 693)
+    );
+    let err = protocol::curve(&methods, &ctx, &rule, &c, &parts, &[2], 1).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("learning-curve size 2: between 3 and the 2080 points of the pool"),
+        "{err}"
+    );
 }
 
 /// The paper's orientation model on the T-Mac's real orientation: the orientation-only parameters are fitted

@@ -344,7 +344,7 @@ fn assert_same_predictions(a: &dyn Fitted, b: &dyn Fitted, test: &Dataset) {
 }
 
 fn round_trip(model: &dyn Fitted) -> Box<dyn Fitted> {
-    let text = serde_json::to_string(&model.save()).unwrap();
+    let text = serde_json::to_string(&model.save().unwrap()).unwrap();
     serde_json::from_str::<SavedModel>(&text)
         .unwrap()
         .into_fitted()
@@ -360,7 +360,7 @@ fn saved_models_predict_identically_after_a_json_round_trip() {
     let residual = ResidualModel::fit(&ctx, &train, &val).unwrap();
     assert!(residual.models_orientation());
     assert_eq!(residual.residual.orientation.len(), 3);
-    let json = serde_json::to_value(residual.save()).unwrap();
+    let json = serde_json::to_value(residual.save().unwrap()).unwrap();
     assert_eq!(json["model"], "residual");
     let back = round_trip(&residual);
     assert_same_predictions(&residual, back.as_ref(), &test);
@@ -387,7 +387,7 @@ fn saved_models_predict_identically_after_a_json_round_trip() {
 
     let hybrid = fit_hybrid(MethodKind::PaperRotz, &ctx, &train, &val).unwrap();
     assert!(hybrid.models_orientation());
-    let json = serde_json::to_value(hybrid.save()).unwrap();
+    let json = serde_json::to_value(hybrid.save().unwrap()).unwrap();
     assert_eq!(json["model"], "hybrid");
     assert_eq!(json["base"]["model"], "paper");
     let back = round_trip(&hybrid);

@@ -1,7 +1,12 @@
-//! The jobs the binaries run, from a scenario: build its world once, hand each stage the world and its own
-//! section, and gather what they return. The only module that reads a [`Scenario`] besides `scenario` itself.
+//! The jobs the binaries run: each binary parses its flags into a job's options, calls the job, and prints
+//! what it returns. [`campaign`] runs a scenario: build its world once, hand each stage the world and its own
+//! section, and gather what they return (the only module that reads a [`Scenario`] besides `scenario`
+//! itself); [`calibrate`] fits a method on measured data and applies a saved model; [`real_data`] runs the
+//! real-data protocol of `eval::protocol` on the UR10 series.
 
+pub mod calibrate;
 pub mod campaign;
+pub mod real_data;
 
 use crate::campaign::{Generator, Simulation};
 use crate::design::DOptimal;

@@ -23,7 +23,8 @@
 //! 3. `calib/registry.rs`: the `MethodKind` variant, its place in `MethodKind::ALL`, its arms in
 //!    `MethodKind::info` and `fit` (the compiler asks for both), and for a new model type a `SavedModel`
 //!    variant with its arms in `SavedModel::of` and `into_fitted` (the first is a downcast the compiler does not
-//!    check: a forgotten type makes `save()` panic with the method's name).
+//!    check: a forgotten type makes `save()` an error naming the method, and the registry's test that every
+//!    method saves and loads fails).
 //!
 //! Everything else asks the descriptor (`MethodKind::info()`): the selection's check that a method has robot
 //! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base

@@ -3,7 +3,10 @@
 
 pub mod budget;
 pub mod oracle;
+pub mod protocol;
+pub mod split;
 pub mod stats;
+pub mod tables;
 pub mod transfer;
 pub mod truth;
 

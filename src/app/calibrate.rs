@@ -1,0 +1,458 @@
+//! The `calibrate` jobs: [`fit`] a method on measured data and judge it on a test split or another campaign
+//! (`report.json`, `model.json`, `predictions.csv`, the paper's Tables 1 and 2), and [`apply`] a saved model
+//! to new joint configurations (predicted poses and corrected commands).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use crate::calib::method::{FitContext, Fitted};
+use crate::calib::registry::{self, MethodKind, Save, SavedModel};
+use crate::calib::regression::RegressionOptions;
+use crate::calib::tracker_frame::Registration;
+use crate::dataset::mapping::ColumnMapping;
+use crate::dataset::{self, Dataset, Split, TruthTable};
+use crate::error::{Error, Result};
+use crate::eval::split::SplitRule;
+use crate::eval::tables::{BeforeAfter, BeforeAfterSummary};
+use crate::eval::transfer::{self, TestRegistration};
+use crate::output;
+use crate::robot::dh::DhChain;
+use crate::robot::{Payload, urdf};
+
+/// What to fit and where to test it (the flags of `calibrate`).
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Measurements (`measurements.csv`), or any export with `mapping`.
+    pub data: PathBuf,
+    pub mapping: Option<PathBuf>,
+    /// Test on this campaign instead of a test split of `data`.
+    pub test_data: Option<PathBuf>,
+    /// The mapping of `test_data`; `mapping` when absent.
+    pub test_mapping: Option<PathBuf>,
+    pub test_registration: TestRegistration,
+    /// Drop the data's extra inputs so no method regresses on them.
+    pub ignore_inputs: bool,
+    pub robot: PathBuf,
+    /// The link carrying the reflectors; the chain's last link when absent.
+    pub flange_link: Option<String>,
+    pub method: MethodKind,
+    pub payload: Payload,
+    /// Ground truth (`truth.csv` of a simulated campaign) of `data`.
+    pub truth: Option<PathBuf>,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Used when the data has no `split` column.
+    pub split: SplitRule,
+    pub regression: RegressionOptions,
+}
+
+/// `report.json`.
+///
+/// Written through [`serde_json::Value`], whose maps keep their keys sorted (serde_json without
+/// `preserve_order`): the file's keys are in alphabetical order at every level, as they always were, and
+/// the method's own facts sit among the common fields.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationReport {
+    pub method: String,
+    pub data: String,
+    pub robot: String,
+    pub n_train: usize,
+    pub n_val: usize,
+    pub n_test: usize,
+    pub fit_ms: f64,
+    /// The model's registration of the training data.
+    pub registration: RegistrationReport,
+    pub test: BeforeAfterSummary,
+    /// The test campaign, with `--test-data`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub test_data: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub test_registration: Option<TestRegistrationReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extra_inputs: Option<Vec<String>>,
+    /// The method's own facts (kept parameters, R², rank, …) at the top level beside the common ones; a fact
+    /// named like a field above replaces it.
+    #[serde(flatten)]
+    pub method_facts: Map<String, Value>,
+    /// Against the ground truth, with `--truth`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth: Option<BeforeAfterSummary>,
+}
+
+/// A registration as `report.json` shows it.
+#[derive(Clone, Debug, Serialize)]
+pub struct RegistrationReport {
+    pub tracker_to_base: Isometry3<f64>,
+    pub mounting_m: Point3<f64>,
+    pub probe_rotation: Option<UnitQuaternion<f64>>,
+    pub rms_mm: f64,
+}
+
+impl RegistrationReport {
+    pub fn of(r: &Registration) -> RegistrationReport {
+        RegistrationReport {
+            tracker_to_base: r.frame.tracker_to_base,
+            mounting_m: r.frame.mounting,
+            probe_rotation: r.probe_rotation,
+            rms_mm: r.frame.rms * 1e3,
+        }
+    }
+}
+
+/// How the test campaign was registered, with `--test-data`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TestRegistrationReport {
+    pub mode: TestRegistration,
+    pub fitted_on_test_data: String,
+    #[serde(flatten)]
+    pub registration: RegistrationReport,
+}
+
+/// What [`fit`] did, for the binary to print.
+#[derive(Clone, Debug)]
+pub struct FitOutcome {
+    pub report: CalibrationReport,
+    /// Tables 1 and 2 on the test data, then against the truth when given.
+    pub tables: String,
+    /// Where the files went.
+    pub out: PathBuf,
+}
+
+/// Fits `options.method` and writes `report.json`, `model.json` and `predictions.csv` into `options.out`,
+/// all or none.
+pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
+    let chain = urdf::load_file(&options.robot, options.flange_link.as_deref())?;
+    let dh = DhChain::from_chain(&chain)?;
+    let mapping = options
+        .mapping
+        .as_deref()
+        .map(ColumnMapping::load)
+        .transpose()?;
+    let read = |path: &Path, mapping: Option<&ColumnMapping>| -> Result<Dataset> {
+        let mut data = match mapping {
+            Some(m) => m.read(path, &chain)?,
+            None => Dataset::read(path, &chain.joint_names())?,
+        };
+        if options.ignore_inputs {
+            data.extra_inputs = None;
+        }
+        Ok(data)
+    };
+    let data = read(&options.data, mapping.as_ref())?;
+    let test_file = match &options.test_data {
+        Some(path) => {
+            let test_mapping = match &options.test_mapping {
+                Some(p) => Some(ColumnMapping::load(p)?),
+                None => mapping.clone(),
+            };
+            Some(read(path, test_mapping.as_ref())?)
+        }
+        None => None,
+    };
+    if test_file.is_some() && options.truth.is_some() {
+        return Err(Error::Invalid(
+            "--truth belongs to the test split of --data; it cannot be combined with --test-data"
+                .into(),
+        ));
+    }
+    let truth = match &options.truth {
+        Some(path) => Some(TruthTable::read(path)?.aligned_to(&data)?),
+        None => None,
+    };
+    let parts = options.split.apply(&data, test_file.is_some())?;
+    if parts.test_indices.is_empty() && test_file.is_none() {
+        return Err(Error::Invalid("the test split is empty".into()));
+    }
+    let (train, val) = (&parts.train, &parts.val);
+    let test = test_file.as_ref().unwrap_or(&parts.test);
+
+    let started = Instant::now();
+    let ctx = FitContext {
+        chain: &chain,
+        dh: &dh,
+        payload: options.payload,
+        regression: options.regression.clone(),
+    };
+    let model = registry::fit(options.method, &ctx, train, val)?;
+    let model = model.as_ref();
+    let fit_ms = started.elapsed().as_secs_f64() * 1e3;
+
+    let (obs_test, test_errors, test_registration) = match &test_file {
+        None => {
+            let obs = model.registration().observe(test)?;
+            let e = BeforeAfter::of(model, &obs);
+            (obs, e, None)
+        }
+        Some(t) => {
+            let mode = options.test_registration;
+            let after = transfer::evaluate(model, t, mode)?;
+            // "Before": the nominal kinematics, registered on the test campaign the same way.
+            let nominal = match options.method {
+                MethodKind::Nominal => None,
+                _ => Some(registry::fit(MethodKind::Nominal, &ctx, train, val)?),
+            };
+            let before = transfer::evaluate(nominal.as_deref().unwrap_or(model), t, mode)?;
+            let obs = after.registration.observe(t)?;
+            let described = TestRegistrationReport {
+                mode,
+                fitted_on_test_data: after.describe(),
+                registration: RegistrationReport::of(&after.registration),
+            };
+            (
+                obs,
+                BeforeAfter::transferred(&before, &after),
+                Some(described),
+            )
+        }
+    };
+    let registration = model.registration();
+    let mut report = CalibrationReport {
+        method: model.method().to_string(),
+        data: options.data.display().to_string(),
+        robot: options.robot.display().to_string(),
+        n_train: train.len(),
+        n_val: val.len(),
+        n_test: test.len(),
+        fit_ms,
+        registration: RegistrationReport::of(registration),
+        test: test_errors.summary()?,
+        test_data: test_registration.as_ref().map(|_| test.origin.clone()),
+        test_registration,
+        extra_inputs: Some(model.input_names().to_vec()).filter(|n| !n.is_empty()),
+        method_facts: match model.report(&obs_test) {
+            Value::Object(facts) => facts,
+            _ => Map::new(),
+        },
+        truth: None,
+    };
+    let truth_errors = match &truth {
+        Some(t) => {
+            let t_test = t.subset(&parts.test_indices);
+            let obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
+            let e = BeforeAfter::of(model, &obs_truth);
+            report.truth = Some(e.summary()?);
+            Some(e)
+        }
+        None => None,
+    };
+
+    let predictions = predictions_csv(model, &data, &parts.labels)?;
+    output::write_files(
+        &options.out,
+        &[
+            ("report.json", to_json(&to_value(&report)?)?),
+            ("model.json", to_json(&model.save()?)?),
+            ("predictions.csv", predictions),
+        ],
+    )?;
+
+    let what = match &report.test_registration {
+        Some(r) => format!(
+            "on {}; fitted on it: {}",
+            test.origin, r.fitted_on_test_data
+        ),
+        None => "on the test split".to_string(),
+    };
+    let mut tables = test_errors.tables(
+        model.method(),
+        &format!("Table 1. Positional errors {what}"),
+        &format!("Table 2. Orientational errors {what}"),
+    )?;
+    if let Some(t) = truth_errors {
+        tables += &t.tables(
+            model.method(),
+            "Against the truth: positional errors on the test split",
+            "Against the truth: orientational errors on the test split",
+        )?;
+    }
+    Ok(FitOutcome {
+        report,
+        tables,
+        out: options.out.clone(),
+    })
+}
+
+fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
+}
+
+/// As a [`Value`], whose maps sort their keys.
+fn to_value(value: &impl Serialize) -> Result<Value> {
+    serde_json::to_value(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
+}
+
+fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
+    let observations = model.registration().observe(data)?;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let csv_err = |e: csv::Error| Error::Invalid(format!("predictions.csv: {e}"));
+    let mut header = vec![
+        "point_id",
+        "split",
+        "measured_x",
+        "measured_y",
+        "measured_z",
+        "nominal_x",
+        "nominal_y",
+        "nominal_z",
+        "predicted_x",
+        "predicted_y",
+        "predicted_z",
+        "error_before_mm",
+        "error_after_mm",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect::<Vec<_>>();
+    let with_orientation = model.registration().measures_orientation();
+    if with_orientation {
+        header.extend(
+            [
+                "predicted_qw",
+                "predicted_qx",
+                "predicted_qy",
+                "predicted_qz",
+                "orientation_before_rad",
+                "orientation_after_rad",
+            ]
+            .map(String::from),
+        );
+    }
+    w.write_record(&header).map_err(csv_err)?;
+    for ((id, o), label) in data.point_ids.iter().zip(&observations).zip(labels) {
+        let (np, nr) = model.nominal(&o.q);
+        let p = model.predict_with(&o.q, &o.inputs);
+        let mut row = vec![id.clone(), format!("{label:?}").to_lowercase()];
+        for v in [o.position.coords, np.coords, p.position.coords] {
+            row.extend(v.iter().map(|x| x.to_string()));
+        }
+        row.push(((o.position - np).norm() * 1e3).to_string());
+        row.push(((o.position - p.position).norm() * 1e3).to_string());
+        if with_orientation {
+            let q = p.orientation.quaternion();
+            row.extend([q.w, q.i, q.j, q.k].map(|v| v.to_string()));
+            let m = o.orientation.unwrap_or(nr);
+            row.push(m.angle_to(&nr).to_string());
+            row.push(m.angle_to(&p.orientation).to_string());
+        }
+        w.write_record(&row).map_err(csv_err)?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
+}
+
+/// What to apply a saved model to (the flags of `calibrate apply`).
+#[derive(Clone, Debug)]
+pub struct ApplyOptions {
+    /// A `model.json` written by [`fit`].
+    pub model: PathBuf,
+    /// Joint configurations: one column per joint of the model.
+    pub data: PathBuf,
+    /// A column mapping for reading `data`.
+    pub mapping: Option<PathBuf>,
+    /// Output CSV.
+    pub out: PathBuf,
+}
+
+/// What [`apply`] did.
+#[derive(Clone, Debug)]
+pub struct ApplyOutcome {
+    pub configurations: usize,
+    /// Configurations without a corrected command: the inverse is undefined there.
+    pub without_command: usize,
+    pub out: PathBuf,
+}
+
+/// Writes the saved model's predicted pose and corrected joint command for every configuration of
+/// `options.data` to `options.out`.
+pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
+    let text = std::fs::read_to_string(&options.model).map_err(|e| Error::Data {
+        origin: options.model.display().to_string(),
+        message: format!("cannot read: {e}"),
+    })?;
+    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| Error::Data {
+        origin: options.model.display().to_string(),
+        message: format!("not a calibrate model: {e}"),
+    })?;
+    let model = saved.into_fitted();
+    let joint_names = model.joint_names().to_vec();
+    let (ids, configurations) = match &options.mapping {
+        Some(path) => {
+            let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+            ColumnMapping::load(path)?.read_joints(&options.data, &joint_names, &prismatic)?
+        }
+        None => dataset::read_joints(&options.data, &joint_names)?,
+    };
+    let out = &options.out;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
+    let mut header: Vec<String> = vec!["point_id".into()];
+    header.extend(joint_names.iter().cloned());
+    header.extend(
+        [
+            "predicted_x",
+            "predicted_y",
+            "predicted_z",
+            "predicted_qw",
+            "predicted_qx",
+            "predicted_qy",
+            "predicted_qz",
+        ]
+        .map(String::from),
+    );
+    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
+    header.push("compensation_residual_m".into());
+    header.push("status".into());
+    w.write_record(&header).map_err(csv_err)?;
+    // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
+    // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
+    let mut singular = 0;
+    for (id, q) in ids.iter().zip(&configurations) {
+        let p = model.predict(q);
+        let r: UnitQuaternion<f64> = p.orientation;
+        let pos: Point3<f64> = p.position;
+        let mut row = vec![id.clone()];
+        row.extend(q.iter().map(|v| v.to_string()));
+        row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
+        match model.compensate(q) {
+            Ok((command, residual)) => {
+                row.extend(command.iter().map(|v| v.to_string()));
+                row.push(residual.to_string());
+                row.push("ok".into());
+            }
+            Err(e) => {
+                singular += 1;
+                row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
+                row.push(format!("no command: {e}"));
+            }
+        }
+        w.write_record(&row).map_err(csv_err)?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| Error::Invalid(format!("{}: {e}", out.display())))?;
+    let (dir, name) = split_path(out)?;
+    output::write_files(dir, &[(name, bytes)])?;
+    Ok(ApplyOutcome {
+        configurations: ids.len(),
+        without_command: singular,
+        out: out.clone(),
+    })
+}
+
+/// A file path's directory (`.` when it has none) and name.
+fn split_path(path: &Path) -> Result<(&Path, &str)> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| Error::Invalid(format!("--out {} is not a file name", path.display())))?;
+    Ok((
+        path.parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new(".")),
+        name,
+    ))
+}

@@ -1,0 +1,329 @@
+//! The `real_data` job: every calibration method on the real UR10 laser-tracker campaigns of Landgraf et al.
+//! (IEEE CASE 2021), read through a column mapping, by the protocol of [`crate::eval::protocol`]; the
+//! README's tables as Markdown, and `real_data.json`.
+//!
+//! 1. **Across campaigns**: fitted on all of series C (training 2/3, validation 1/3, split seed 0) and tested
+//!    on all of series D and of series B; fitted on B, tested on C. Each test campaign's tracker frame and
+//!    probe mounting are re-registered on its own points (`eval::transfer`), the same for every method.
+//! 2. **Within series C**: `calibrate`'s default split (50 / 25 / 25 %, seed 0), the model's own registration.
+//! 3. **Temperature**: every method that regresses on inputs beyond the joint angles, again with the
+//!    temperature column offered as a candidate input.
+//! 4. **The learning curve**: sizes drawn from the training and validation part of (2), several draws each,
+//!    each split 2/3 training, 1/3 validation, all tested on the same held-out 25 % of series C.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::calib::method::FitContext;
+use crate::calib::regression::RegressionOptions;
+use crate::dataset::Dataset;
+use crate::dataset::mapping::ColumnMapping;
+use crate::error::{Error, Result};
+use crate::eval::protocol::{self, CurvePoint, METHODS, Row, Table, TestSet};
+use crate::eval::split::SplitRule;
+use crate::eval::transfer::TestRegistration;
+use crate::eval::{Stats, centre};
+use crate::output;
+use crate::robot::dh::DhChain;
+use crate::robot::{Chain, urdf};
+
+/// The files of the three series, under the data set's directory.
+pub const SERIES: [(&str, &str); 3] = [
+    ("B", "Series_B/measurements_joint_configurations.csv"),
+    ("C", "Series_C/measurements_random_poses.csv"),
+    ("D", "Series_D/measurements_iso_cubes.csv"),
+];
+
+/// Where the data is and what to run (the flags of `real_data`).
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// The data set's directory (Series_B, Series_C, Series_D).
+    pub data_dir: PathBuf,
+    pub mapping: PathBuf,
+    pub robot: PathBuf,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Draws per learning-curve size.
+    pub draws: usize,
+    /// Learning-curve sizes; none skips the curve.
+    pub sizes: Option<Vec<usize>>,
+}
+
+/// `real_data.json`.
+#[derive(Serialize)]
+struct Report {
+    protocol: serde_json::Value,
+    across: Vec<(String, Vec<Row>)>,
+    within_c: Vec<Row>,
+    curve: Vec<CurvePoint>,
+}
+
+/// Reads the three series of `options.data_dir` through the mapping, runs the protocol, hands each table to
+/// `show` as Markdown as soon as it is ready, and writes `real_data.json` into `options.out`. Returns the
+/// file's path.
+pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
+    let chain = urdf::load_file(&options.robot, None)?;
+    let dh = DhChain::from_chain(&chain)?;
+    let mapping = ColumnMapping::load(&options.mapping)?;
+    let series = read_series(&options.data_dir, &mapping, &chain)?;
+    let [b, c, d] = [&series[0], &series[1], &series[2]];
+    let ctx = FitContext::new(&chain, &dh);
+    let rule = SplitRule::default();
+    let refit = |name, data| TestSet {
+        name,
+        data,
+        registration: TestRegistration::Refit,
+    };
+    show(&ranges_md(&series, &chain));
+    show(&repeats_md(&series));
+
+    // 1. Across campaigns.
+    let mut across = Vec::new();
+    for (train, tests) in [
+        (("C", c), vec![refit("D", d), refit("B", b)]),
+        (("B", b), vec![refit("C", c)]),
+    ] {
+        let table = protocol::across(&METHODS, &ctx, &rule, train, &tests)?;
+        show(&rows_md(&table));
+        show(&best_md(&table.rows));
+        across.push((table.title, table.rows));
+    }
+
+    // 2. Within series C.
+    let (within_c, parts) = protocol::within(&METHODS, &ctx, &rule, ("C", c))?;
+    show(&rows_md(&within_c));
+
+    // 3. The learning curve: subsets of C's training + validation pool, tested on the held-out 25 %.
+    let curve = match &options.sizes {
+        None => Vec::new(),
+        Some(sizes) => {
+            let curve = protocol::curve(&METHODS, &ctx, &rule, c, &parts, sizes, options.draws)?;
+            show(&curve_md(&curve, sizes, parts.test.len()));
+            curve
+        }
+    };
+
+    let protocol = serde_json::json!({
+        "data": options.data_dir.display().to_string(),
+        "mapping": options.mapping.display().to_string(),
+        "robot": options.robot.display().to_string(),
+        "train_fraction": rule.train_fraction(),
+        "seed": rule.seed,
+        "test_registration_across": "tracker frame (rigid, 6) and probe mounting (position 3, rotation 3) re-registered on each test series' own points against the model's predicted flange poses",
+        "payload_kg": 0.0,
+        "regression": RegressionOptions::default(),
+    });
+    let report = Report {
+        protocol,
+        across,
+        within_c: within_c.rows,
+        curve,
+    };
+    let json = serde_json::to_vec_pretty(&report)
+        .map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))?;
+    output::write_files(&options.out, &[("real_data.json", json)])?;
+    Ok(options.out.join("real_data.json"))
+}
+
+/// The three series, in the order of [`SERIES`].
+pub fn read_series(dir: &Path, mapping: &ColumnMapping, chain: &Chain) -> Result<Vec<Dataset>> {
+    SERIES
+        .iter()
+        .map(|(_, file)| mapping.read(&dir.join(file), chain))
+        .collect()
+}
+
+fn name(r: &Row) -> String {
+    if r.inputs.is_empty() {
+        format!("`{}`", r.method)
+    } else {
+        format!("`{}` + {}", r.method, r.inputs.join(", "))
+    }
+}
+
+// `write!` into a `String` cannot fail: its results are ignored below.
+
+fn rows_md(table: &Table) -> String {
+    let (title, rows) = (&table.title, &table.rows);
+    let mut out = String::new();
+    let _ = writeln!(out, "\n#### {title}\n");
+    let tests: Vec<&str> = rows[0].scores.iter().map(|s| s.test.as_str()).collect();
+    out += "| method |";
+    for t in &tests {
+        let _ = write!(
+            out,
+            " {t}: mean / max / std / p95 (mm) | {t}: orientation mean / p95 (mrad) |"
+        );
+    }
+    out += " fit (ms) |\n|---|";
+    for _ in &tests {
+        out += "---|---|";
+    }
+    out += "---|\n";
+    for r in rows {
+        let _ = write!(out, "| {} |", name(r));
+        for s in &r.scores {
+            let p = &s.position_mm;
+            let _ = write!(
+                out,
+                " {:.4} / {:.3} / {:.3} / {:.3} |",
+                p.mean, p.max, p.std, p.p95
+            );
+            match &s.orientation_mrad {
+                Some(o) => {
+                    let _ = write!(out, " {:.3} / {:.3} |", o.mean, o.p95);
+                }
+                None => out += " — |",
+            }
+        }
+        let _ = writeln!(out, " {:.0} |", r.fit_ms);
+    }
+    out += "\n";
+    for s in &rows[0].scores {
+        let _ = writeln!(
+            out,
+            "{}: {} (the same for every method).",
+            s.test, s.fitted_on_test
+        );
+    }
+    out
+}
+
+/// The best mean on each test against `kinematic`'s: the margin the README reports.
+fn best_md(rows: &[Row]) -> String {
+    let mut out = String::new();
+    for (k, s) in rows[0].scores.iter().enumerate() {
+        let mean = |r: &Row| r.scores[k].position_mm.mean;
+        let best = rows
+            .iter()
+            .min_by(|a, b| mean(a).total_cmp(&mean(b)))
+            .expect("rows");
+        if let Some(kin) = rows.iter().find(|r| r.method == "kinematic") {
+            let _ = writeln!(
+                out,
+                "{}: best {} at {:.4} mm mean, {:.1} % below `kinematic`'s {:.4} mm.",
+                s.test,
+                name(best),
+                mean(best),
+                100.0 * (1.0 - mean(best) / mean(kin)),
+                mean(kin)
+            );
+        }
+    }
+    out
+}
+
+/// Configurations measured more than once (joint angles equal to 1 mrad): how far each measurement lies from
+/// its group's mean, in the tracker frame. What no model of the joint angles can remove.
+fn repeats_md(series: &[Dataset]) -> String {
+    let mut out = String::from(
+        "\n#### Repeated configurations: distance of each measurement from its group's mean (mm)\n\n\
+         | series | groups | measurements | mean | p95 | max |\n|---|---|---|---|---|---|\n",
+    );
+    for ((name, _), data) in SERIES.iter().zip(series) {
+        let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
+        for (i, q) in data.q.iter().enumerate() {
+            let key = q.iter().map(|v| (v * 1e3).round() as i64).collect();
+            groups.entry(key).or_default().push(i);
+        }
+        let mut distances = Vec::new();
+        let mut n_groups = 0;
+        for members in groups.values().filter(|m| m.len() > 1) {
+            n_groups += 1;
+            let points: Vec<_> = members.iter().map(|&i| data.measured[i][0]).collect();
+            let mean = centre(&points);
+            distances.extend(points.iter().map(|p| (p - mean).norm() * 1e3));
+        }
+        let _ = match Stats::of(&distances) {
+            Some(s) => writeln!(
+                out,
+                "| {name} | {n_groups} | {} | {:.4} | {:.4} | {:.4} |",
+                distances.len(),
+                s.mean,
+                s.p95,
+                s.max
+            ),
+            None => writeln!(out, "| {name} | 0 | 0 | — | — | — |"),
+        };
+    }
+    out + "\n"
+}
+
+/// Per series: the range of every joint (degrees) and of the temperature: where each model is fitted.
+fn ranges_md(series: &[Dataset], chain: &Chain) -> String {
+    let mut out = String::from(
+        "#### Where the series lie: joint ranges (°) and temperature (°C), min … max\n\n| series | points |",
+    );
+    for j in chain.joint_names() {
+        let _ = write!(out, " {j} |");
+    }
+    let _ = writeln!(
+        out,
+        " temperature |\n|---|---|{}---|",
+        "---|".repeat(chain.dof())
+    );
+    for ((name, _), data) in SERIES.iter().zip(series) {
+        let _ = write!(out, "| {name} | {} |", data.len());
+        let range = |values: Vec<f64>| {
+            let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (lo, hi)
+        };
+        for j in 0..chain.dof() {
+            let (lo, hi) = range(data.q.iter().map(|q| q[j].to_degrees()).collect());
+            let _ = write!(out, " {lo:.0} … {hi:.0} |");
+        }
+        let _ = match &data.extra_inputs {
+            Some(x) => {
+                let (lo, hi) = range(x.values.iter().map(|v| v[0]).collect());
+                writeln!(out, " {lo:.2} … {hi:.2} |")
+            }
+            None => writeln!(out, " — |"),
+        };
+    }
+    out
+}
+
+fn curve_md(curve: &[CurvePoint], sizes: &[usize], n_test: usize) -> String {
+    let mut out = format!(
+        "\n#### Learning curve: mean position error (mm) on the {n_test} held-out points of series C, \
+         mean over draws (min–max)\n\n| method |"
+    );
+    for n in sizes {
+        let _ = write!(out, " {n} |");
+    }
+    out += "\n|---|";
+    for _ in sizes {
+        out += "---|";
+    }
+    out += "\n";
+    for kind in METHODS {
+        let _ = write!(out, "| `{}` |", kind.name());
+        for &n in sizes {
+            let of_cell = || {
+                curve
+                    .iter()
+                    .filter(move |p| p.method == kind.name() && p.size == n)
+            };
+            let values: Vec<f64> = of_cell().filter_map(|p| p.mean_mm).collect();
+            let failed = of_cell().filter(|p| p.mean_mm.is_none()).count();
+            if values.is_empty() {
+                out += " failed |";
+                continue;
+            }
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = values.iter().copied().fold(0.0, f64::max);
+            let note = if failed > 0 {
+                format!(" ({failed} failed)")
+            } else {
+                String::new()
+            };
+            let _ = write!(out, " {mean:.3} ({lo:.3}–{hi:.3}){note} |");
+        }
+        out += "\n";
+    }
+    out
+}
