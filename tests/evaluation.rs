@@ -14,7 +14,7 @@ use calibench::calib::method::{FitContext, Fitted};
 use calibench::calib::registry::{self, MethodKind};
 use calibench::calib::regression::RegressionOptions;
 use calibench::campaign::Simulation;
-use calibench::eval::truth::{
+use calibench::eval::accuracy::{
     EvaluationConfig, GroundTruth, closed_loop_errors, split_campaign, test_errors, truth_errors,
 };
 use calibench::eval::{Oracle, centre};

@@ -141,7 +141,7 @@ fn study(chain: &Chain) -> StudyResult {
         distance_bands_m: vec![0.025, 0.05],
     };
     StudyResult {
-        scenario: scenario.world_config(),
+        world: scenario.world_config(),
         config,
         regions,
         runs,

@@ -143,7 +143,7 @@ fn study(orientation: bool) -> StudyResult {
             histograms,
             tracker: Isometry3::identity(),
         },
-        scenario: scenario.world_config(),
+        world: scenario.world_config(),
         config,
         regions,
         runs,

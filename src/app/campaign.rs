@@ -25,7 +25,7 @@ pub struct Options {
 }
 
 /// What the job did, for the binary to print.
-pub struct Outcome {
+pub struct CampaignRun {
     pub scenario: Scenario,
     pub sim: Simulation,
     /// How long the campaign took to simulate.
@@ -41,7 +41,7 @@ pub struct Outcome {
 
 /// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
 /// `evaluation.json` and the study's files, into the output directory, all or none.
-pub fn run(scenario: Scenario, options: &Options) -> Result<Outcome> {
+pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     let started = Instant::now();
     let sim = super::simulate(&scenario)?;
     let generated = started.elapsed();
@@ -116,7 +116,7 @@ pub fn run(scenario: Scenario, options: &Options) -> Result<Outcome> {
         None => None,
     };
     output::write_files(&out, &files)?;
-    Ok(Outcome {
+    Ok(CampaignRun {
         scenario,
         sim,
         generated,

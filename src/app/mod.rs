@@ -11,7 +11,7 @@ pub mod real_data;
 use crate::campaign::{Generator, Simulation};
 use crate::design::DOptimal;
 use crate::error::{Error, Result};
-use crate::eval::truth::fit_context;
+use crate::eval::accuracy::fit_context;
 use crate::scenario::Scenario;
 use crate::study::sweep::{self, Progress};
 use crate::study::{StudyConfig, StudyResult};

@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
-use calibench::app::campaign::{self, Options, Outcome};
+use calibench::app::campaign::{self, CampaignRun, Options};
 use calibench::eval::Stats;
 use calibench::scenario::Scenario;
 use calibench::{Error, Result};
@@ -71,7 +71,7 @@ fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-fn print(done: &Outcome) {
+fn print(done: &CampaignRun) {
     let campaign = &done.sim.campaign;
     println!(
         "scenario '{}': {} points in {:.2} s",

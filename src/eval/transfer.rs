@@ -22,7 +22,7 @@
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use super::truth::Errors;
+use super::accuracy::PointErrors;
 use crate::calib::method::Fitted;
 use crate::calib::rigid::centre;
 use crate::calib::tracker_frame::{
@@ -68,7 +68,7 @@ pub struct Transfer {
     /// about some direction).
     pub mounting_directions: usize,
     /// Distances (m) and, where the campaign measures it, orientation angles (rad) per point.
-    pub errors: Errors,
+    pub errors: PointErrors,
 }
 
 /// The extra inputs of `data` the model takes: its own names must be the data's (a model without extra
@@ -210,7 +210,7 @@ pub fn evaluate(model: &dyn Fitted, data: &Dataset, mode: TestRegistration) -> R
         }
     };
     let observations = registration.observe(data)?;
-    let mut errors = Errors::default();
+    let mut errors = PointErrors::default();
     for (o, f) in observations.iter().zip(&flanges) {
         errors
             .position

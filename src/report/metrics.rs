@@ -181,7 +181,7 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
     for run in &study.runs {
         let k = &run.key;
         let mut record = vec![
-            study.scenario.name.clone(),
+            study.world.name.clone(),
             k.region.clone(),
             k.distribution.name().to_string(),
             k.method.clone(),
@@ -254,7 +254,7 @@ pub fn outside_csv(study: &StudyResult) -> Result<Vec<u8>> {
         let k = &run.key;
         for b in &run.by_distance {
             w.write_record([
-                study.scenario.name.clone(),
+                study.world.name.clone(),
                 k.region.clone(),
                 b.use_region.clone(),
                 k.distribution.name().to_string(),

@@ -84,7 +84,7 @@ const ARROW_TARGET_M: f64 = 0.1;
 /// caller writes the file atomically and a failed study leaves no partial recording behind.
 pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Result<Vec<u8>> {
     let (rec, storage) = RecordingStreamBuilder::new(APPLICATION_ID)
-        .recording_id(format!("calibench-{}", sanitize(&study.scenario.name)))
+        .recording_id(format!("calibench-{}", sanitize(&study.world.name)))
         // Forced on: the recording is an output of the harness, whatever the `RERUN` environment says.
         .enabled(true)
         .memory()

@@ -36,7 +36,7 @@ fn micro(x_m: f64) -> String {
 }
 
 fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
-    let s = &study.scenario;
+    let s = &study.world;
     let c = &study.config;
     let robot = s.robot.urdf.file_stem().map_or_else(
         || s.robot.urdf.display().to_string(),
@@ -378,7 +378,7 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
     let curves = learning_curves(study);
     let largest = *a.sizes.last().expect("runs imply a size");
     let mut out = String::new();
-    let _ = writeln!(out, "# Study `{}`\n", study.scenario.name);
+    let _ = writeln!(out, "# Study `{}`\n", study.world.name);
     let _ = writeln!(
         out,
         "How many tracker points, placed how, with which method? Every number below is computed from \

@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::calib::registry::MethodKind;
 use crate::campaign::{DistributionKind, RegionConfig};
-use crate::eval::truth::{EvaluationConfig, ORACLE};
+use crate::eval::accuracy::{EvaluationConfig, ORACLE};
 
 /// No ground-truth set, size or test set may ask for more points than this per region.
 const MAX_POINTS: usize = 1_000_000;

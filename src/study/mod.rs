@@ -123,7 +123,7 @@ pub struct Detail {
 #[derive(Clone, Debug, Serialize)]
 pub struct StudyResult {
     /// The world the study ran in: the scenario's name, seed, robot, true errors, tracker and reflectors.
-    pub scenario: WorldConfig,
+    pub world: WorldConfig,
     pub config: StudyConfig,
     pub regions: Vec<RegionConfig>,
     /// Every run, in a fixed order (region, distribution, method, size, seed): independent of threads.

@@ -33,7 +33,7 @@ use crate::campaign::{Campaign, CampaignConfig, DistributionKind, Generator, Reg
 use crate::dataset::Dataset;
 use crate::design::{DOptimal, DesignModel, Indices};
 use crate::error::{Error, Result};
-use crate::eval::truth::{
+use crate::eval::accuracy::{
     GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
 };
 use crate::eval::{Oracle, Stats};
@@ -293,7 +293,7 @@ pub fn run_study(
             tracker: world.tracker.pose,
         });
     Ok(StudyResult {
-        scenario: world.config.clone(),
+        world: world.config.clone(),
         config: config.clone(),
         regions: regions.to_vec(),
         runs,
@@ -303,7 +303,7 @@ pub fn run_study(
 }
 
 /// The measured outcome of one method on one campaign.
-struct Outcome {
+struct MethodRun {
     metrics: RunMetrics,
     points: Option<PointData>,
 }
@@ -392,7 +392,7 @@ impl Shared<'_> {
             .map(|s| s.mean);
         let detail_job = self.is_detail_candidate(job);
         let observability = self.observability(&train);
-        let outcomes: Vec<Outcome> = (0..self.kinds.len())
+        let outcomes: Vec<MethodRun> = (0..self.kinds.len())
             .into_par_iter()
             .map(|m| {
                 let mut outcome =
@@ -444,14 +444,14 @@ impl Shared<'_> {
         val: &Dataset,
         floor_mean: Option<f64>,
         detail_job: bool,
-    ) -> Outcome {
+    ) -> MethodRun {
         let started = Instant::now();
         let fitted = registry::fit(self.kinds[m], &self.ctx, train, val);
         let fit_ms = started.elapsed().as_secs_f64() * 1e3;
         let model = match fitted {
             Ok(model) => model,
             Err(e) => {
-                return Outcome {
+                return MethodRun {
                     metrics: self.failed(job, m, reason(&e), fit_ms),
                     points: None,
                 };
@@ -462,7 +462,7 @@ impl Shared<'_> {
         let test = match test_errors(model.as_ref(), &sets.test) {
             Ok(e) => e,
             Err(e) => {
-                return Outcome {
+                return MethodRun {
                     metrics: self.failed(job, m, reason(&e), fit_ms),
                     points: None,
                 };
@@ -485,7 +485,7 @@ impl Shared<'_> {
             .iter()
             .find(|(_, errors, points)| *points > 0 && Stats::of(errors).is_none())
         {
-            return Outcome {
+            return MethodRun {
                 metrics: self.failed(
                     job,
                     m,
@@ -505,7 +505,7 @@ impl Shared<'_> {
                 )
             }),
         });
-        Outcome {
+        MethodRun {
             metrics: RunMetrics {
                 key: self.key(job, m),
                 failure: None,
@@ -589,7 +589,7 @@ impl Shared<'_> {
         campaign: &Campaign,
         train: &Dataset,
         val: &Dataset,
-        outcomes: &[Outcome],
+        outcomes: &[MethodRun],
     ) -> Option<Detail> {
         let nominal = registry::fit(MethodKind::Nominal, &self.ctx, train, val).ok()?;
         let sets = &self.regions[job.region];

@@ -310,7 +310,7 @@ fn shell_layout(
 
 /// Per-point errors of one view: distances (m) and, where the data has it, orientation angles (rad).
 #[derive(Clone, Debug, Default)]
-pub struct Errors {
+pub struct PointErrors {
     pub position: Vec<f64>,
     pub orientation: Vec<f64>,
     /// Points the method could not handle (closed loop: its inverse did not converge).
@@ -319,9 +319,9 @@ pub struct Errors {
 }
 
 /// Measured (the tracker, through the method's registration) vs predicted, on held-out data.
-pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<Errors> {
+pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<PointErrors> {
     let observations = model.registration().observe(test)?;
-    let mut e = Errors::default();
+    let mut e = PointErrors::default();
     for o in &observations {
         let pred = model.predict_with(&o.q, &o.inputs);
         e.position.push((o.position - pred.position).norm());
@@ -333,7 +333,7 @@ pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<Errors> {
 }
 
 /// True (mapped into the method's frame) vs predicted at the commands of `points`.
-pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> Errors {
+pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> PointErrors {
     let to_method = truth.to_method(model);
     let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<(f64, Option<f64>)> = points
@@ -348,7 +348,7 @@ pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint
             ((position - pred.position).norm(), angle)
         })
         .collect();
-    let mut e = Errors::default();
+    let mut e = PointErrors::default();
     for (d, a) in per_point {
         e.position.push(d);
         e.orientation.extend(a);
@@ -365,7 +365,7 @@ pub fn closed_loop_errors(
     truth: &GroundTruth,
     robot: &TrueRobot,
     points: &[TruePoint],
-) -> Errors {
+) -> PointErrors {
     let to_method = truth.to_method(model);
     let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<std::result::Result<(f64, Option<f64>), String>> = points
@@ -391,7 +391,7 @@ pub fn closed_loop_errors(
             },
         )
         .collect();
-    let mut e = Errors::default();
+    let mut e = PointErrors::default();
     for outcome in per_point {
         match outcome {
             Ok((d, a)) => {
@@ -419,7 +419,7 @@ pub struct Summary {
     pub first_failure: Option<String>,
 }
 
-impl Errors {
+impl PointErrors {
     pub fn summary(&self) -> Summary {
         Summary {
             position_mm: Stats::of(&self.position).map(|s| s.scaled(1e3)),
