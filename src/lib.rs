@@ -1,7 +1,7 @@
 //! calibench: a benchmark harness for robot absolute-accuracy calibration.
 //!
-//! Modules follow the pipeline of `DESIGN.md`. Each imports only modules written before it in this order
-//! (the `module_order` test checks it):
+//! Modules follow the pipeline of a calibration campaign (the README's module table says what each holds).
+//! Each imports only modules written before it in this order (the `module_order` test checks it):
 //!
 //! - `error`, `rng`, `output`: serve every stage;
 //! - `robot` (the nominal chain: URDF, DH form, kinematics, IK, collisions) → `truth` (the true robot) →

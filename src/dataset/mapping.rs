@@ -39,7 +39,7 @@ use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::table::{Dialect, Table};
-use super::{Dataset, ExtraInputs, Split};
+use super::{Dataset, ExtraInputs};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::chain::JointKind;
@@ -524,13 +524,7 @@ impl ColumnMapping {
                     .collect::<Result<Vec<f64>>>()?,
             );
             if let (Some(out), Some(c)) = (&mut split, split_col) {
-                let cell = table.cell(r, c);
-                out.push(Split::parse(cell).ok_or_else(|| {
-                    table.error(format!(
-                        "{}: '{cell}' is not a split (train, val, validation or test)",
-                        table.at(r, c)
-                    ))
-                })?);
+                out.push(table.split(r, c)?);
             }
             let id = match id_col {
                 Some(c) => {

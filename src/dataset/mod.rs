@@ -130,13 +130,7 @@ impl Dataset {
                 out.push(table.pose(r, cols)?);
             }
             if let (Some(out), Some(c)) = (&mut split, split_col) {
-                let cell = table.cell(r, c);
-                out.push(Split::parse(cell).ok_or_else(|| {
-                    table.error(format!(
-                        "{}: '{cell}' is not a split (train, val, validation or test)",
-                        table.at(r, c)
-                    ))
-                })?);
+                out.push(table.split(r, c)?);
             }
             if let (Some(out), Some(c)) = (&mut regions, region_col) {
                 out.push(table.cell(r, c).to_string());

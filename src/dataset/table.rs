@@ -8,6 +8,7 @@ use std::path::Path;
 
 use nalgebra::Point3;
 
+use super::split::Split;
 use crate::error::{Error, Result};
 
 pub(super) fn open(path: &Path) -> Result<std::fs::File> {
@@ -196,6 +197,17 @@ impl Table {
     }
 
     /// A number in the file's dialect (a mapped export may write a decimal comma).
+    /// The cell at row `r`, column `c` as a split label.
+    pub(super) fn split(&self, r: usize, c: usize) -> Result<Split> {
+        let cell = self.cell(r, c);
+        Split::parse(cell).ok_or_else(|| {
+            self.error(format!(
+                "{}: '{cell}' is not a split (train, val, validation or test)",
+                self.at(r, c)
+            ))
+        })
+    }
+
     pub(super) fn number(&self, r: usize, c: usize) -> Result<f64> {
         let cell = self.cell(r, c);
         if cell.is_empty() {
