@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::campaign::Campaign;
-use crate::dataset::FLANGE_COLUMNS;
+use crate::dataset::{Dataset, FLANGE_COLUMNS};
 use crate::error::{Error, Result};
 
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
@@ -96,4 +96,11 @@ pub fn truth_csv(campaign: &Campaign) -> Result<Vec<u8>> {
         row
     });
     csv_bytes(header, rows)
+}
+
+/// The campaign as a method sees it: `measurements.csv` read back, so that nothing but what a real campaign
+/// yields reaches a method. `origin` names it in messages.
+pub fn as_dataset(campaign: &Campaign, origin: &str) -> Result<Dataset> {
+    let csv = measurements_csv(campaign)?;
+    Dataset::from_reader(csv.as_slice(), origin, &campaign.joint_names)
 }

@@ -21,6 +21,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::oracle::{Oracle, nest_rotation};
+use super::split::Parts;
 use super::stats::Stats;
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
@@ -29,8 +30,9 @@ use crate::campaign::generate::{GROUND_TRUTH_ATTEMPT, TruePoint};
 use crate::campaign::{
     CampaignConfig, DistributionKind, Generator, RegionConfig, Rejections, Simulation,
 };
-use crate::dataset::{Dataset, Split, random_split};
+use crate::dataset::{Dataset, random_split};
 use crate::error::{Error, Result};
+use crate::measurements::as_dataset;
 use crate::rng::Stream;
 use crate::truth::{TrueRobot, TrueState};
 use crate::world::World;
@@ -510,19 +512,9 @@ pub fn split_campaign(
     fractions: [f64; 3],
     seed: u64,
 ) -> Result<(Dataset, Dataset, Dataset)> {
-    let csv = crate::measurements::measurements_csv(&sim.campaign)?;
-    let data = Dataset::from_reader(
-        csv.as_slice(),
-        "the campaign's measurements",
-        &sim.world.nominal.joint_names(),
-    )?;
-    let labels = random_split(data.len(), fractions, seed)?;
-    let pick = |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
-    Ok((
-        data.subset(&pick(Split::Train)),
-        data.subset(&pick(Split::Val)),
-        data.subset(&pick(Split::Test)),
-    ))
+    let data = as_dataset(&sim.campaign, "the campaign's measurements")?;
+    let parts = Parts::of(&data, random_split(data.len(), fractions, seed)?);
+    Ok((parts.train, parts.val, parts.test))
 }
 
 /// Every view of one fitted method.

@@ -37,6 +37,7 @@ use crate::eval::accuracy::{
     GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
 };
 use crate::eval::{Oracle, Stats};
+use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
 use crate::world::World;
 
@@ -89,12 +90,6 @@ impl Measure<'_> {
         }
         .run(std::slice::from_ref(&region))
     }
-}
-
-/// The campaign as a method sees it (`measurements.csv` read back).
-fn dataset(campaign: &Campaign, origin: &str) -> Result<Dataset> {
-    let csv = crate::measurements::measurements_csv(campaign)?;
-    Dataset::from_reader(csv.as_slice(), origin, &campaign.joint_names)
 }
 
 /// The ground truth restricted to one region.
@@ -222,7 +217,7 @@ pub fn run_study(
                     ))
                 })?;
             Ok(RegionSets {
-                test: dataset(
+                test: as_dataset(
                     &campaign,
                     &format!("the test set of region '{}'", region.name),
                 )?,
@@ -425,7 +420,7 @@ impl Shared<'_> {
         let layout = self.config.distributions[job.distribution];
         let total = self.config.campaign_points(n);
         let campaign = self.measure.campaign(job.region, layout, total, seed)?;
-        let data = dataset(&campaign, "the study's campaign")?;
+        let data = as_dataset(&campaign, "the study's campaign")?;
         let mut order: Vec<usize> = (0..data.len()).collect();
         order.shuffle(&mut derive(seed, Stream::Split, &[]));
         let (mut train, mut val) = (order[..n.min(order.len())].to_vec(), order[n..].to_vec());
