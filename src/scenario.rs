@@ -180,7 +180,7 @@ impl Scenario {
 /// A model-based layout's `selection.model` must name a method with robot parameters to determine.
 fn selection_model(name: &str) -> std::result::Result<(), String> {
     let kind = MethodKind::parse(name).map_err(|e| format!("selection.model: {}", e.detail()))?;
-    if !kind.info().has_robot_parameters {
+    if !kind.info().has_robot_parameters() {
         return Err(format!(
             "selection.model = '{name}' has no robot parameters to determine; use kinematic, elastic or a \
              paper model"

@@ -29,8 +29,6 @@ pub struct MethodInfo {
     pub summary: &'static str,
     /// Whether it regresses on the data's inputs beyond the joint angles (e.g. `temperature`).
     pub takes_inputs: bool,
-    /// Whether it identifies parameters of the robot (a campaign can then be designed to determine them).
-    pub has_robot_parameters: bool,
     /// A hybrid's base method: the one whose prediction it corrects.
     pub base: Option<&'static MethodInfo>,
     /// The model a campaign for this method is designed for.
@@ -62,6 +60,11 @@ impl Serialize for MethodInfo {
 }
 
 impl MethodInfo {
+    /// Whether it identifies parameters of the robot: those its points can be designed to determine.
+    pub fn has_robot_parameters(&self) -> bool {
+        self.design != Design::None
+    }
+
     /// Reads a method's name from a file, as one of `methods` (those a model type can be).
     pub fn deserialize_among<'de, D: Deserializer<'de>>(
         deserializer: D,

@@ -18,7 +18,8 @@
 //! and the registry:
 //!
 //! 1. its own file: the model, its `impl Fitted` and its `const …: MethodInfo` (name, summary, whether it takes
-//!    extra inputs, whether it has robot parameters, its base if it is a hybrid, its design model);
+//!    extra inputs, its base if it is a hybrid, the model its points are designed for — which also says whether
+//!    it has robot parameters);
 //! 2. `calib/mod.rs`: `pub mod …;`;
 //! 3. `calib/registry.rs`: the `MethodKind` variant, its place in `MethodKind::ALL`, its arms in
 //!    `MethodKind::info` and `fit` (the compiler asks for both), and for a new model type a `SavedModel`

@@ -39,7 +39,6 @@ pub const NOMINAL: MethodInfo = MethodInfo {
     name: "nominal",
     summary: "the nominal model on the registered tracker frame and mounting (the paper's \"Measured\")",
     takes_inputs: false,
-    has_robot_parameters: false,
     base: None,
     design: Design::None,
 };
@@ -55,7 +54,6 @@ const fn paper_method(name: &'static str, kind: ErrorModelKind) -> MethodInfo {
         name,
         summary: "the paper's error parameters, each a ridge regression on the configuration (and extra inputs)",
         takes_inputs: true,
-        has_robot_parameters: true,
         base: None,
         design: Design::ErrorModel(kind),
     }

@@ -40,7 +40,6 @@ pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
     name: "residual-ridge",
     summary: "the nominal prediction plus ridge models of its residual on the joint angles (and extra inputs)",
     takes_inputs: true,
-    has_robot_parameters: false,
     base: None,
     design: Design::None,
 };
@@ -54,7 +53,6 @@ pub const HYBRID_ON_OTHER_BASE: MethodInfo = MethodInfo {
     name: "hybrid-<base>",
     summary: "a base method's prediction plus ridge models of its residual",
     takes_inputs: true,
-    has_robot_parameters: false,
     base: None,
     design: Design::None,
 };
@@ -65,7 +63,6 @@ const fn hybrid(name: &'static str, base: &'static MethodInfo) -> MethodInfo {
         name,
         summary: "a base method's prediction plus ridge models of its residual",
         takes_inputs: true,
-        has_robot_parameters: base.has_robot_parameters,
         base: Some(base),
         design: base.design,
     }

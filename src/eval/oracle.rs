@@ -102,7 +102,6 @@ pub const ORACLE: MethodInfo = MethodInfo {
     name: "oracle",
     summary: "the true robot, noise-free: the measurement-noise floor",
     takes_inputs: false,
-    has_robot_parameters: false,
     base: None,
     design: Design::None,
 };

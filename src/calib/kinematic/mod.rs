@@ -89,7 +89,6 @@ pub const KINEMATIC: MethodInfo = MethodInfo {
     name: "kinematic",
     summary: "classical calibration: constant DH-frame errors, tracker frame and mounting by Levenberg–Marquardt",
     takes_inputs: false,
-    has_robot_parameters: true,
     base: None,
     design: Design::Identification { elastic: false },
 };
@@ -98,7 +97,6 @@ pub const ELASTIC: MethodInfo = MethodInfo {
     name: "elastic",
     summary: "kinematic calibration plus one joint compliance per joint under the nominal gravity torques",
     takes_inputs: false,
-    has_robot_parameters: true,
     base: None,
     design: Design::Identification { elastic: true },
 };
