@@ -1,6 +1,9 @@
 //! `kinematic` and `elastic`: constant-parameter calibration by Levenberg–Marquardt, on data whose errors are
 //! known exactly, and the structural identifiable set on simulated campaigns.
 
+mod common;
+use common::synthetic::{Extra, NOISE, PAYLOAD, Synthetic, iiwa, mean, noise_mean, synthetic};
+
 use calibench::calib::error_model::{
     ErrorModelKind, FrameErrors, error_jacobian, error_jacobian_at, flange_pose_with_errors,
 };
@@ -12,110 +15,12 @@ use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;
 use calibench::robot::dynamics::{GRAVITY, gravity_torques};
 use calibench::robot::kinematics::forward_kinematics;
-use calibench::robot::{Chain, Frames, Payload, urdf};
+use calibench::robot::{Chain, Frames, Payload};
 use calibench::scenario::Scenario;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-
-const NOISE: f64 = 10e-6;
-const PAYLOAD: Payload = Payload {
-    mass: 0.4,
-    com: [0.0, 0.0, 0.03],
-};
-
-fn iiwa() -> (Chain, DhChain) {
-    let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
-    let dh = DhChain::from_chain(&chain).unwrap();
-    (chain, dh)
-}
-
-/// What the synthetic robot does besides its constant error transforms.
-#[derive(Default)]
-struct Extra {
-    /// Joint compliances (rad/Nm): the arm deflects by `C τ(q)`, τ of the nominal URDF inertials + payload.
-    compliance: Option<Vec<f64>>,
-    /// Joint (0-based) held at the centre value in every configuration.
-    fixed_joint: Option<usize>,
-    /// Half-width of the joint ranges around the centre configuration (rad).
-    spread: Option<f64>,
-    /// The load the compliant joints carry (default [`PAYLOAD`]).
-    payload: Option<Payload>,
-}
-
-struct Synthetic {
-    chain: Chain,
-    dh: DhChain,
-    data: Dataset,
-    /// Noise-free true positions in the tracker frame.
-    truth: Vec<Point3<f64>>,
-}
-
-/// A robot following eq. 6 with constant `errors`, measured with 10 µm noise by a tracker at an unknown pose,
-/// one reflector mounted 0.7 mm off its nominal place (as tests/calibrate.rs builds it).
-fn synthetic(errors: &FrameErrors, n: usize, seed: u64, extra: &Extra) -> Synthetic {
-    let (chain, dh) = iiwa();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let tracker = Isometry3::from_parts(
-        Translation3::new(3.0, 0.3, 1.7),
-        UnitQuaternion::from_euler_angles(0.01, 0.02, 3.1),
-    );
-    let (mount_nominal, mount_true) = (
-        Point3::new(0.0, 0.0, 0.03),
-        Point3::new(0.0006, -0.0004, 0.0302),
-    );
-    let noise = Normal::new(0.0, NOISE).unwrap();
-    let (mut q, mut measured, mut nominal, mut truth) = (vec![], vec![], vec![], vec![]);
-    let centre = [0.0, 0.6, 0.0, -1.6, 0.0, -0.8, 0.0];
-    let spread = extra.spread.unwrap_or(0.5);
-    let mut frames = Frames::new(&chain);
-    let mut tau = vec![0.0; 7];
-    for _ in 0..n {
-        let qi: Vec<f64> = centre
-            .iter()
-            .enumerate()
-            .map(|(j, c)| {
-                let d = rng.random_range(-spread..spread);
-                if extra.fixed_joint == Some(j) {
-                    *c
-                } else {
-                    c + d
-                }
-            })
-            .collect();
-        let reached: Vec<f64> = match &extra.compliance {
-            Some(c) => {
-                forward_kinematics(&chain, &qi, &mut frames);
-                let payload = extra.payload.unwrap_or(PAYLOAD);
-                gravity_torques(&chain, &frames, &payload, &GRAVITY, &mut tau);
-                qi.iter()
-                    .zip(c)
-                    .zip(&tau)
-                    .map(|((q, c), t)| q + c * t)
-                    .collect()
-            }
-            None => qi.clone(),
-        };
-        let true_point = tracker.inverse_transform_point(
-            &(flange_pose_with_errors(&dh, &reached, errors) * mount_true),
-        );
-        truth.push(true_point);
-        measured.push(vec![
-            true_point + Vector3::from_fn(|_, _| noise.sample(&mut rng)),
-        ]);
-        nominal.push(vec![dh.flange_pose(&qi) * mount_nominal]);
-        q.push(qi);
-    }
-    let mut data = Dataset::in_memory("synthetic", chain.joint_names(), q, measured);
-    data.nominal_reflectors = Some(nominal);
-    Synthetic {
-        chain,
-        dh,
-        data,
-        truth,
-    }
-}
 
 fn random_errors(sigma: f64, seed: u64) -> FrameErrors {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -136,16 +41,6 @@ fn context<'a>(chain: &'a Chain, dh: &'a DhChain, payload: Payload) -> FitContex
 
 fn range(a: usize, b: usize) -> Vec<usize> {
     (a..b).collect()
-}
-
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
-    let v: Vec<f64> = v.collect();
-    v.iter().sum::<f64>() / v.len() as f64
-}
-
-/// Mean distance of a 3-D isotropic normal error of σ per axis: σ·√(8/π).
-fn noise_mean() -> f64 {
-    NOISE * (8.0 / std::f64::consts::PI).sqrt()
 }
 
 /// Mean distance on the test split to the measurements and to the noise-free truth.

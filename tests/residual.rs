@@ -2,24 +2,18 @@
 //! model (eq. 6) with constant error transforms, plus a smooth position field of two joints, measured by a
 //! noisy tracker at an unknown pose.
 
-use calibench::calib::error_model::{FrameErrors, flange_pose_with_errors};
+mod common;
+use common::synthetic::{self as fixture, Extra, Field, Synthetic, mean, noise_mean};
+
+use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::{FitContext, Fitted};
 use calibench::calib::registry::{MethodKind, Save, SavedModel, fit, fit_hybrid};
 use calibench::calib::regression::RegressionOptions;
 use calibench::calib::residual::ResidualModel;
 use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::Dataset;
-use calibench::robot::dh::DhChain;
-use calibench::robot::{Chain, Payload, urdf};
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
-
-const NOISE: f64 = 10e-6;
-
-/// A position error (base frame, m) as a function of the joint angles.
-type Field = fn(&[f64]) -> Vector3<f64>;
+use calibench::robot::Payload;
+use nalgebra::{Point3, UnitQuaternion, Vector3};
 
 /// A smooth position error (base frame, m) of joints 2 and 4, up to about 0.2 mm.
 fn field(q: &[f64]) -> Vector3<f64> {
@@ -34,79 +28,14 @@ fn no_field(_: &[f64]) -> Vector3<f64> {
     Vector3::zeros()
 }
 
-struct Synthetic {
-    chain: Chain,
-    dh: DhChain,
-    data: Dataset,
-    /// Noise-free true measured points (nest centres) in the tracker frame.
-    truth: Vec<Point3<f64>>,
-    /// True flange orientations in the tracker frame.
-    truth_orientation: Vec<UnitQuaternion<f64>>,
-}
-
-/// `n` points of a forward-reaching family of configurations; one reflector, or a nest of three.
+/// `n` points of the common synthetic robot with `field` on top; one reflector, or a nest of three.
 fn synthetic(errors: &FrameErrors, field: Field, nest: bool, n: usize, seed: u64) -> Synthetic {
-    let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
-    let dh = DhChain::from_chain(&chain).unwrap();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let tracker = Isometry3::from_parts(
-        Translation3::new(3.0, 0.3, 1.7),
-        UnitQuaternion::from_euler_angles(0.01, 0.02, 3.1),
-    );
-    let (mount_nominal, mount_true) = (
-        Point3::new(0.0, 0.0, 0.03),
-        Point3::new(0.0006, -0.0004, 0.0302),
-    );
-    let offsets: Vec<Vector3<f64>> = if nest {
-        vec![
-            Vector3::new(0.03, 0.0, 0.0),
-            Vector3::new(-0.015, 0.026, 0.0),
-            Vector3::new(-0.015, -0.026, 0.0),
-        ]
-    } else {
-        vec![Vector3::zeros()]
+    let extra = Extra {
+        field: Some(field),
+        nest,
+        ..Extra::default()
     };
-    let noise = Normal::new(0.0, NOISE).unwrap();
-    let (mut q, mut measured, mut nominal, mut truth) = (vec![], vec![], vec![], vec![]);
-    let mut truth_orientation = vec![];
-    let centre = [0.0, 0.6, 0.0, -1.6, 0.0, -0.8, 0.0];
-    for _ in 0..n {
-        let qi: Vec<f64> = centre
-            .iter()
-            .map(|c| c + rng.random_range(-0.5..0.5))
-            .collect();
-        let flange = flange_pose_with_errors(&dh, &qi, errors);
-        let shift = field(&qi);
-        let true_points: Vec<Point3<f64>> = offsets
-            .iter()
-            .map(|d| tracker.inverse_transform_point(&(flange * (mount_true + d) + shift)))
-            .collect();
-        truth.push(tracker.inverse_transform_point(&(flange * mount_true + shift)));
-        truth_orientation.push(tracker.rotation.inverse() * flange.rotation);
-        measured.push(
-            true_points
-                .iter()
-                .map(|p| p + Vector3::from_fn(|_, _| noise.sample(&mut rng)))
-                .collect(),
-        );
-        let nominal_flange = dh.flange_pose(&qi);
-        nominal.push(
-            offsets
-                .iter()
-                .map(|d| nominal_flange * (mount_nominal + d))
-                .collect(),
-        );
-        q.push(qi);
-    }
-    let mut data = Dataset::in_memory("synthetic", chain.joint_names(), q, measured);
-    data.nominal_reflectors = Some(nominal);
-    Synthetic {
-        chain,
-        dh,
-        data,
-        truth,
-        truth_orientation,
-    }
+    fixture::synthetic(errors, n, seed, &extra)
 }
 
 /// Training, validation and test halves-quarter-quarter of the data.
@@ -130,11 +59,6 @@ fn ctx<'a>(s: &'a Synthetic, cross_terms: bool) -> FitContext<'a> {
             ..RegressionOptions::default()
         },
     }
-}
-
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
-    let v: Vec<f64> = v.collect();
-    v.iter().sum::<f64>() / v.len() as f64
 }
 
 /// Mean distance from the observations to the model's predictions.
@@ -161,11 +85,6 @@ fn truth_obs(model: &dyn Fitted, s: &Synthetic, test: &Dataset) -> Vec<Observati
         .registration()
         .observe_points(&test.q, &points)
         .unwrap()
-}
-
-/// Mean distance of a 3-D isotropic normal error of σ per axis: σ·√(8/π).
-fn noise_mean() -> f64 {
-    NOISE * (8.0 / std::f64::consts::PI).sqrt()
 }
 
 fn constant_errors() -> FrameErrors {

@@ -1,5 +1,8 @@
-//! Helpers shared by the integration tests that drive the binaries.
+//! Helpers shared by the integration tests: those that drive the binaries here, the synthetic robot in
+//! [`synthetic`].
 #![allow(dead_code)]
+
+pub mod synthetic;
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
