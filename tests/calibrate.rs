@@ -1,8 +1,7 @@
 //! The paper's pipeline on data whose errors are known exactly: a robot that follows the paper's own error
 //! model (eq. 6) with constant error transforms, measured by a noisy tracker at an unknown pose.
 
-mod common;
-use common::synthetic::{Extra, mean, noise_mean, synthetic};
+use crate::common::synthetic::{Extra, mean, noise_mean, synthetic};
 
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::FitContext;

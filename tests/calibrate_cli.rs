@@ -5,8 +5,7 @@
 //! Campaigns come from the `campaign` binary on the shipped paper scenarios with a small point count,
 //! written to a temporary directory; both binaries run from the crate root so `robots/iiwa7.urdf` resolves.
 
-mod common;
-use common::{assert_clean_failure, edit, files_under, read};
+use crate::common::{assert_clean_failure, edit, files_under, read};
 
 use std::collections::HashMap;
 use std::ffi::OsStr;

@@ -4,8 +4,7 @@
 //! Every scenario here is the shipped paper_iiwa (or paper_iiwa_pose) with a small point count, written to a
 //! temporary directory; the binary runs from the crate root so `robots/iiwa7.urdf` resolves.
 
-mod common;
-use common::{assert_clean_failure, edit, read};
+use crate::common::{assert_clean_failure, edit, read};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

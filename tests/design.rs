@@ -2,8 +2,7 @@
 //! selector's refusal of a pool that cannot determine the model, d-optimal campaigns (deterministic, better
 //! conditioned than uniform ones) and whether d-optimal pays at small N on `geometric_only`.
 
-mod common;
-use common::edit;
+use crate::common::edit;
 
 use calibench::app::run_study;
 use calibench::app::simulate;

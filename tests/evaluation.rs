@@ -2,8 +2,7 @@
 //! closed-loop errors vanish; a method's ground-truth error is computed in its own registered frame (checked
 //! against an independent computation); `campaign` writes `evaluation.json` with every method.
 
-mod common;
-use common::{edit, read};
+use crate::common::{edit, read};
 
 use std::path::Path;
 use std::process::Command;

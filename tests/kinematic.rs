@@ -1,8 +1,9 @@
 //! `kinematic` and `elastic`: constant-parameter calibration by Levenberg–Marquardt, on data whose errors are
 //! known exactly, and the structural identifiable set on simulated campaigns.
 
-mod common;
-use common::synthetic::{Extra, NOISE, PAYLOAD, Synthetic, iiwa, mean, noise_mean, synthetic};
+use crate::common::synthetic::{
+    Extra, NOISE, PAYLOAD, Synthetic, iiwa, mean, noise_mean, synthetic,
+};
 
 use calibench::calib::error_model::{
     ErrorModelKind, FrameErrors, error_jacobian, error_jacobian_at, flange_pose_with_errors,

@@ -3,8 +3,7 @@
 //! in metres and radians, the Euler convention is the right one, a bad mapping or a bad cell is one clear
 //! line, the 6-DoF probe's orientation is modelled, and the README's C → D numbers reproduce.
 
-mod common;
-use common::assert_clean_failure;
+use crate::common::assert_clean_failure;
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};

@@ -496,7 +496,7 @@ fn plots_are_pngs_and_write_into_a_subdirectory() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 
-    // To look at the output: REPORT_TEST_OUT=/some/dir cargo test --release --test report
+    // To look at the output: REPORT_TEST_OUT=/some/dir cargo test --release --test suite report::
     if let Ok(out) = std::env::var("REPORT_TEST_OUT") {
         calibench::output::write_files(Path::new(&out), &files).unwrap();
     }

@@ -2,8 +2,7 @@
 //! model (eq. 6) with constant error transforms, plus a smooth position field of two joints, measured by a
 //! noisy tracker at an unknown pose.
 
-mod common;
-use common::synthetic::{self as fixture, Extra, Field, Synthetic, mean, noise_mean};
+use crate::common::synthetic::{self as fixture, Extra, Field, Synthetic, mean, noise_mean};
 
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::{FitContext, Fitted};

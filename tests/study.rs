@@ -2,8 +2,7 @@
 //! while the others go on, one run per (region, layout, method, size, seed) in config order, every run above
 //! its oracle floor, and bad `[study]` sections refused on one line naming the field.
 
-mod common;
-use common::edit;
+use crate::common::edit;
 
 use std::sync::OnceLock;
 

@@ -1,13 +1,11 @@
 //! The study through the `campaign` binary: thread-count independence of the files a person or a script reads,
 //! bad study inputs, and an interrupted run leaving nothing behind.
 
-mod common;
-
 use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Duration;
 
-use common::{assert_clean_failure, edit, files_under, read};
+use crate::common::{assert_clean_failure, edit, files_under, read};
 
 const DEFAULT: &str = include_str!("../scenarios/default.toml");
 
