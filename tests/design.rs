@@ -3,6 +3,7 @@
 //! conditioned than uniform ones) and whether d-optimal pays at small N on `geometric_only`.
 
 use crate::common::edit;
+use crate::common::synthetic::iiwa;
 
 use calibench::app::run_study;
 use calibench::app::simulate;
@@ -11,7 +12,6 @@ use calibench::calib::registry::MethodKind;
 use calibench::design::{DesignModel, Indices, SelectOptions, d_optimal};
 use calibench::robot::Chain;
 use calibench::robot::dh::DhChain;
-use calibench::robot::urdf;
 use calibench::scenario::Scenario;
 use calibench::study::sweep::Progress;
 use nalgebra::{DMatrix, Point3};
@@ -19,12 +19,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 const GEOMETRIC: &str = include_str!("../scenarios/geometric_only.toml");
-
-fn iiwa() -> (Chain, DhChain) {
-    let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
-    let dh = DhChain::from_chain(&chain).unwrap();
-    (chain, dh)
-}
 
 /// `count` configurations uniform within 90 % of the joint ranges; joint `fixed` (if any) held at 0.3 rad.
 fn configurations(chain: &Chain, count: usize, fixed: Option<usize>, seed: u64) -> Vec<Vec<f64>> {
