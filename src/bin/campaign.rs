@@ -22,7 +22,7 @@ const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
     about = "Simulate a laser-tracker calibration campaign with known true robot errors"
 )]
 struct Args {
-    /// Scenario file (TOML); the embedded paper_iiwa scenario when omitted.
+    /// Scenario file (TOML); the embedded default study (`scenarios/default.toml`) when omitted.
     scenario: Option<PathBuf>,
     /// Output directory [default: results/<scenario name>].
     #[arg(long)]
