@@ -747,3 +747,164 @@ fn apply_reports_a_singular_configuration_per_row() {
     assert_eq!(&bent[col("status")], "ok");
     assert!(bent[col("compensation_residual_m")].parse::<f64>().unwrap() <= 1e-9);
 }
+
+/// The first regression model in `model` (depth first) that has coefficients.
+fn first_fitted_regression(model: &mut Value) -> Option<&mut Value> {
+    if model
+        .get("coef")
+        .and_then(Value::as_array)
+        .is_some_and(|c| !c.is_empty())
+    {
+        return Some(model);
+    }
+    match model {
+        Value::Object(fields) => fields.values_mut().find_map(first_fitted_regression),
+        Value::Array(items) => items.iter_mut().find_map(first_fitted_regression),
+        _ => None,
+    }
+}
+
+/// A saved model is input: a `model.json` that does not fit its own contents (a joint name, DH row,
+/// coefficient or error row removed) or holds no plausible number (1e300, a NaN written as a string, a null)
+/// is refused by `calibrate apply` with exit code 1 and one line naming the file and the field — never a
+/// panic (exit 101), never predictions of 1e296 — and no output file. The untouched models still apply.
+#[test]
+fn apply_refuses_a_model_that_does_not_fit_itself() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(40)).join("measurements.csv");
+    let apply = |model: &Path, name: &str| {
+        let out = dir.path().join(format!("apply_{name}"));
+        let output = calibrate(&[
+            "apply".as_ref(),
+            "--model".as_ref(),
+            model.as_os_str(),
+            "--data".as_ref(),
+            data.as_os_str(),
+            "--out".as_ref(),
+            out.join("applied.csv").as_os_str(),
+        ]);
+        (output, out)
+    };
+    type Change = fn(&mut Value);
+    let cases: [(&str, &str, Change, &str); 11] = [
+        (
+            "paper-rotxyz",
+            "no_joint_name",
+            |m| {
+                m["joint_names"].as_array_mut().unwrap().pop();
+            },
+            "joint_names",
+        ),
+        (
+            "paper-rotxyz",
+            "no_dh_row",
+            |m| {
+                m["dh"]["rows"].as_array_mut().unwrap().remove(2);
+            },
+            "dh.rows",
+        ),
+        (
+            "paper-rotxyz",
+            "no_coefficient",
+            |m| {
+                let r = first_fitted_regression(m).expect("a regression with coefficients");
+                r["coef"].as_array_mut().unwrap().pop();
+            },
+            ".model.coef",
+        ),
+        (
+            "paper-rotxyz",
+            "huge_coefficient",
+            |m| {
+                let r = first_fitted_regression(m).expect("a regression with coefficients");
+                r["coef"][0] = Value::from(1e300);
+            },
+            ".model.coef[0]",
+        ),
+        (
+            "paper-rotxyz",
+            "nan_string",
+            |m| {
+                m["dh"]["rows"][1]["d"] = Value::from("NaN");
+            },
+            "dh.rows[1].d",
+        ),
+        (
+            "paper-rotxyz",
+            "null_mounting",
+            |m| {
+                m["registration"]["frame"]["mounting"][0] = Value::Null;
+            },
+            "registration.frame.mounting[0]",
+        ),
+        (
+            "kinematic",
+            "no_error_row",
+            |m| {
+                m["errors"].as_array_mut().unwrap().pop();
+            },
+            "errors",
+        ),
+        (
+            "kinematic",
+            "huge_dh_length",
+            |m| {
+                m["dh"]["rows"][3]["a"] = Value::from(1e300);
+            },
+            "dh.rows[3].a",
+        ),
+        (
+            "hybrid",
+            "base_without_error_row",
+            |m| {
+                m["base"]["errors"].as_array_mut().unwrap().remove(0);
+            },
+            "base.errors",
+        ),
+        (
+            "hybrid",
+            "base_without_joint_name",
+            |m| {
+                m["base"]["joint_names"].as_array_mut().unwrap().remove(0);
+            },
+            "base.dh.rows",
+        ),
+        (
+            "hybrid",
+            "null_error",
+            |m| {
+                m["base"]["errors"][2][1] = Value::Null;
+            },
+            "base.errors[2][1]",
+        ),
+    ];
+    let mut models = HashMap::new();
+    for method in ["paper-rotxyz", "kinematic", "hybrid"] {
+        let fit = dir.path().join(format!("fit_{method}"));
+        fit_ok(&data, &fit, &["--method", method]);
+        let model = fit.join("model.json");
+        let (output, out) = apply(&model, method);
+        assert!(
+            output.status.success(),
+            "the untouched {method} model: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert_eq!(files_under(&out), vec![out.join("applied.csv")]);
+        models.insert(method, json(&model));
+    }
+    for (method, name, change, field) in cases {
+        let mut model = models[method].clone();
+        change(&mut model);
+        let path = dir.path().join(format!("{name}.json"));
+        std::fs::write(&path, serde_json::to_vec_pretty(&model).unwrap()).unwrap();
+        let (output, out) = apply(&path, name);
+        assert_eq!(
+            output.status.code(),
+            Some(1),
+            "{name}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let line = assert_clean_failure(&output, &out, &[&format!("{name}.json"), field]);
+        assert!(!out.exists(), "{name}: {line}");
+    }
+}

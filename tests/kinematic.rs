@@ -189,7 +189,8 @@ fn the_saved_model_predicts_the_same() {
         let json = serde_json::to_string(&model.save().unwrap()).unwrap();
         let back = serde_json::from_str::<SavedModel>(&json)
             .unwrap()
-            .into_fitted();
+            .into_fitted()
+            .unwrap();
         assert_eq!(back.method(), kind.name());
         for q in &s.data.q[..20] {
             let (a, b) = (model.predict(q).position, back.predict(q).position);

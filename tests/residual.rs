@@ -266,6 +266,7 @@ fn round_trip(model: &dyn Fitted) -> Box<dyn Fitted> {
     serde_json::from_str::<SavedModel>(&text)
         .unwrap()
         .into_fitted()
+        .unwrap()
 }
 
 #[test]

@@ -369,15 +369,7 @@ pub struct ApplyOutcome {
 /// Writes the saved model's predicted pose and corrected joint command for every configuration of
 /// `options.data` to `options.out`.
 pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
-    let text = std::fs::read_to_string(&options.model).map_err(|e| Error::Data {
-        origin: options.model.display().to_string(),
-        message: format!("cannot read: {e}"),
-    })?;
-    let saved: SavedModel = serde_json::from_str(&text).map_err(|e| Error::Data {
-        origin: options.model.display().to_string(),
-        message: format!("not a calibrate model: {e}"),
-    })?;
-    let model = saved.into_fitted();
+    let model = SavedModel::read(&options.model)?;
     let joint_names = model.joint_names().to_vec();
     let (ids, configurations) = match &options.mapping {
         Some(path) => {

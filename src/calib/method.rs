@@ -18,6 +18,7 @@ use super::tracker_frame::{Observation, Registration};
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
 use crate::robot::kinematics::joint_column;
+use crate::robot::plausible;
 use crate::robot::{Chain, Payload};
 
 /// What a method is, said once next to the method (a `const` in its file) and asked of it everywhere else.
@@ -95,6 +96,35 @@ pub struct Basis {
     /// The nominal kinematics the method corrects (DH form of the robot's URDF).
     pub dh: DhChain,
     pub registration: Registration,
+}
+
+impl Basis {
+    /// What a file holds for the basis is usable: one DH row per joint name, names non-empty and distinct
+    /// (a data column drives one joint), and the DH table and registration valid on their own.
+    pub fn validate(&self) -> Result<()> {
+        if let Some(i) = self.joint_names.iter().position(|n| n.trim().is_empty()) {
+            return Err(plausible::invalid(
+                &format!("joint_names[{i}]"),
+                "an empty joint name",
+            ));
+        }
+        for (i, name) in self.joint_names.iter().enumerate() {
+            if self.joint_names[..i].contains(name) {
+                return Err(plausible::invalid(
+                    &format!("joint_names[{i}]"),
+                    format!("'{name}' appears twice"),
+                ));
+            }
+        }
+        plausible::within("dh", self.dh.validate())?;
+        plausible::count(
+            "dh.rows",
+            self.dh.rows.len(),
+            self.joint_names.len(),
+            "joint_names",
+        )?;
+        plausible::within("registration", self.registration.validate())
+    }
 }
 
 /// What a method may know besides the data: the nominal robot as its maker describes it.

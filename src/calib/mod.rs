@@ -25,7 +25,8 @@
 //!    `MethodKind::info` and `fit` (the compiler asks for both), and for a new model type a `SavedModel`
 //!    variant with its arms in `SavedModel::of` and `into_fitted` (the first is a downcast the compiler does not
 //!    check: a forgotten type makes `save()` an error naming the method, and the registry's test that every
-//!    method saves and loads fails).
+//!    method saves and loads fails; the second calls the model's own `validate`, since a saved model is input
+//!    and must fit its own contents before it predicts).
 //!
 //! Everything else asks the descriptor (`MethodKind::info()`): the selection's check that a method has robot
 //! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base

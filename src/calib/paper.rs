@@ -23,6 +23,7 @@ use super::regression::{RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::robot::plausible;
 
 /// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
 /// paper's indistinguishable parameters (eq. 14–16, 22) make `J_e` rank-deficient by construction.
@@ -98,6 +99,94 @@ pub struct PaperModel {
     pub extra_input_means: Vec<f64>,
     pub position: Vec<ParameterModel>,
     pub orientation: Vec<ParameterModel>,
+}
+
+impl PaperModel {
+    /// A model read from a file can predict: its basis is valid ([`Basis::validate`]); the method matches the
+    /// error model; the candidates (where a regression reads them) are the joints, `tcp_x`, `tcp_y`, `tcp_z`
+    /// and the extra inputs, with one training mean per extra input; every parameter model is a parameter of the error model on this chain,
+    /// named as it, once, and a valid regression on those candidates.
+    pub fn validate(&self) -> Result<()> {
+        self.basis.validate()?;
+        if self.method.name != info_of(self.kind).name {
+            return Err(plausible::invalid(
+                "method",
+                format!(
+                    "'{}' with kind {}: that error model is the method '{}'",
+                    self.method.name,
+                    self.kind.map_or("null", |k| k.name()),
+                    info_of(self.kind).name
+                ),
+            ));
+        }
+        let joints = &self.basis.joint_names;
+        let n = joints.len();
+        let want: Vec<String> = joints
+            .iter()
+            .cloned()
+            .chain(["tcp_x", "tcp_y", "tcp_z"].map(String::from))
+            .chain(self.extra_inputs.iter().cloned())
+            .collect();
+        // Only the regressions read the candidates: a model without any (nominal) predicts whatever they are.
+        let regresses = !(self.position.is_empty() && self.orientation.is_empty());
+        if regresses && self.candidates != want {
+            return Err(plausible::invalid(
+                "candidates",
+                format!(
+                    "[{}] are not the joint_names, tcp_x, tcp_y, tcp_z and the extra_inputs [{}]",
+                    self.candidates.join(", "),
+                    want.join(", ")
+                ),
+            ));
+        }
+        plausible::count(
+            "extra_input_means",
+            self.extra_input_means.len(),
+            self.extra_inputs.len(),
+            "extra_inputs",
+        )?;
+        for (k, &v) in self.extra_input_means.iter().enumerate() {
+            plausible::finite(&format!("extra_input_means[{k}]"), v)?;
+        }
+        let components = self.kind.map_or(&[][..], |k| k.components());
+        for (group, models) in [
+            ("position", &self.position),
+            ("orientation", &self.orientation),
+        ] {
+            for (i, m) in models.iter().enumerate() {
+                let field = format!("{group}[{i}]");
+                let p = m.param;
+                if !(1..=n).contains(&p.frame) || !components.contains(&p.component) {
+                    return Err(plausible::invalid(
+                        &format!("{field}.param"),
+                        format!(
+                            "frame {} component {} is not a parameter of {} on {n} joints",
+                            p.frame,
+                            p.component,
+                            self.kind.map_or("the nominal model (none)", |k| k.name())
+                        ),
+                    ));
+                }
+                if m.name != p.name() {
+                    return Err(plausible::invalid(
+                        &format!("{field}.name"),
+                        format!("'{}' for parameter {}", m.name, p.name()),
+                    ));
+                }
+                if models[..i].iter().any(|o| o.param == p) {
+                    return Err(plausible::invalid(
+                        &format!("{field}.param"),
+                        format!("{} appears twice", p.name()),
+                    ));
+                }
+                plausible::within(
+                    &format!("{field}.model"),
+                    m.model.validate(self.candidates.len()),
+                )?;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Per-point identified error parameters (eq. 13), for the regression and for R² on the test split.

@@ -5,6 +5,7 @@
 //! model) is not said here: [`MethodKind::info`] points to the constant in the method's own file.
 
 use std::any::Any;
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -154,19 +155,107 @@ impl SavedModel {
         }))
     }
 
-    pub fn into_fitted(self) -> Box<dyn Fitted> {
-        match self {
-            SavedModel::Paper(m) => Box::new(m),
-            SavedModel::Kinematic(m) => m,
-            SavedModel::Residual(m) => Box::new(m),
-            SavedModel::Hybrid(h) => Box::new(
-                HybridModel {
+    /// The model, ready to predict, after checking it whole: a saved model is input, and one that does not
+    /// fit its own contents (a DH row or coefficient too few) or holds numbers no fit gives (1e300) would
+    /// panic or predict nonsense. Each model type checks itself (`validate` next to it); the error names the
+    /// field by its path in the file (`base.dh.rows[2].d` in a hybrid's base). See [`SavedModel::read`].
+    pub fn into_fitted(self) -> Result<Box<dyn Fitted>> {
+        Ok(match self {
+            SavedModel::Paper(m) => {
+                m.validate()?;
+                Box::new(m)
+            }
+            SavedModel::Kinematic(m) => {
+                m.validate()?;
+                m
+            }
+            SavedModel::Residual(m) => {
+                m.validate()?;
+                Box::new(m)
+            }
+            SavedModel::Hybrid(h) => {
+                let base = h
+                    .base
+                    .into_fitted()
+                    .map_err(|e| Error::Invalid(format!("base.{}", e.detail())))?;
+                let hybrid = HybridModel {
                     method: h.method,
                     residual: h.residual,
-                }
-                .on(h.base.into_fitted()),
-            ),
+                };
+                hybrid.validate(base.as_ref())?;
+                Box::new(hybrid.on(base))
+            }
+        })
+    }
+
+    /// Reads `model.json` at `path` into a model ready to predict ([`SavedModel::into_fitted`]); any fault is
+    /// one `Error::Data` naming the file (and the field).
+    pub fn read(path: &Path) -> Result<Box<dyn Fitted>> {
+        let data = |message: String| Error::Data {
+            origin: path.display().to_string(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| data(format!("cannot read: {e}")))?;
+        let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
+            // A model's fields are read through buffered content (its tag, its flattened basis), which loses
+            // the place of a wrong type; find the number written as a string or null ourselves.
+            let place = serde_json::from_str::<serde_json::Value>(&text)
+                .ok()
+                .and_then(|v| wrong_type_at(&v, &e.to_string(), ""))
+                .map_or(String::new(), |field| format!("{field}: "));
+            data(format!("not a calibrate model: {place}{e}"))
+        })?;
+        saved
+            .into_fitted()
+            .map_err(|e| data(format!("not a usable model: {}", e.detail())))
+    }
+}
+
+/// Fields of `model.json` that may be `null`.
+const NULLABLE: [&str; 7] = [
+    "kind",
+    "nest",
+    "compliance",
+    "gravity",
+    "orientation_length_m",
+    "validation_rms_m",
+    "probe_rotation",
+];
+
+/// The path (`dh.rows[1].d`) of the first value that serde's `error` is about when it is a wrong type where
+/// a number belongs: a `null` in a list or in a field that is never null, or the very string it names
+/// (`"NaN"`). `None` for any other error.
+fn wrong_type_at(value: &serde_json::Value, error: &str, path: &str) -> Option<String> {
+    use serde_json::Value;
+    let culprit = |k: Option<&str>, v: &Value| match v {
+        Value::Null => {
+            error.contains("invalid type: null") && k.is_none_or(|k| !NULLABLE.contains(&k))
         }
+        Value::String(s) => error.contains(&format!("invalid type: string {s:?}")),
+        _ => false,
+    };
+    match value {
+        Value::Array(items) => items.iter().enumerate().find_map(|(i, v)| {
+            let field = format!("{path}[{i}]");
+            if culprit(None, v) {
+                Some(field)
+            } else {
+                wrong_type_at(v, error, &field)
+            }
+        }),
+        Value::Object(fields) => fields.iter().find_map(|(k, v)| {
+            let field = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}.{k}")
+            };
+            if culprit(Some(k), v) {
+                Some(field)
+            } else {
+                wrong_type_at(v, error, &field)
+            }
+        }),
+        _ => None,
     }
 }
 
@@ -258,7 +347,7 @@ mod tests {
         );
         let back: SavedModel = serde_json::from_str(&text).unwrap();
         assert_eq!(serde_json::to_string(&back).unwrap(), text);
-        assert_eq!(back.into_fitted().method(), "nominal");
+        assert_eq!(back.into_fitted().unwrap().method(), "nominal");
     }
 
     /// Every method of the list saves, and its `model.json` loads into a model that predicts the same, bit for
@@ -296,7 +385,8 @@ mod tests {
             let text = serde_json::to_string(&model.save().unwrap()).unwrap();
             let back = serde_json::from_str::<SavedModel>(&text)
                 .unwrap()
-                .into_fitted();
+                .into_fitted()
+                .unwrap();
             assert_eq!(back.method(), kind.name());
             for q in &test.q {
                 let (a, b) = (model.predict(q), back.predict(q));

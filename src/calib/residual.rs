@@ -35,6 +35,7 @@ use super::tracker_frame::{Observation, Registration, fit_tracker_frame, probe_r
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
+use crate::robot::plausible;
 
 pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
     name: "residual-ridge",
@@ -291,6 +292,56 @@ impl ResidualCorrection {
         }
     }
 
+    /// A correction read from a file can predict on a chain with `joint_names`: its candidates are those
+    /// joints then one per training mean of an extra input; three position components `dx`, `dy`, `dz`, and
+    /// three orientation components `rx`, `ry`, `rz` or none; each a valid regression on the candidates.
+    pub fn validate(&self, joint_names: &[String]) -> Result<()> {
+        let n = joint_names.len();
+        let extra = self.input_means.len();
+        if self.candidates.len() != n + extra || self.candidates[..n] != *joint_names {
+            return Err(plausible::invalid(
+                "candidates",
+                format!(
+                    "[{}] are not the {n} joint names [{}] followed by one name per input_means entry ({extra})",
+                    self.candidates.join(", "),
+                    joint_names.join(", ")
+                ),
+            ));
+        }
+        for (k, &v) in self.input_means.iter().enumerate() {
+            plausible::finite(&format!("input_means[{k}]"), v)?;
+        }
+        for (group, models, names, optional) in [
+            ("position", &self.position, POSITION_NAMES, false),
+            ("orientation", &self.orientation, ORIENTATION_NAMES, true),
+        ] {
+            if !(models.len() == 3 || optional && models.is_empty()) {
+                return Err(plausible::invalid(
+                    group,
+                    format!(
+                        "{} components; the model has {}the three {}",
+                        models.len(),
+                        if optional { "none or " } else { "" },
+                        names.join(", ")
+                    ),
+                ));
+            }
+            for (k, (m, name)) in models.iter().zip(names).enumerate() {
+                if m.name != name {
+                    return Err(plausible::invalid(
+                        &format!("{group}[{k}].name"),
+                        format!("'{}' where '{name}' belongs", m.name),
+                    ));
+                }
+                plausible::within(
+                    &format!("{group}[{k}].model"),
+                    m.model.validate(self.candidates.len()),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
     /// Names of the extra inputs (the candidates after the joint angles).
     pub fn extra_inputs(&self) -> &[String] {
         &self.candidates[self.candidates.len() - self.input_means.len()..]
@@ -472,6 +523,13 @@ impl ResidualModel {
         Ok(best.expect("at least one round").1)
     }
 
+    /// A model read from a file can predict: a valid basis ([`Basis::validate`]) and a valid correction
+    /// on its joints ([`ResidualCorrection::validate`]).
+    pub fn validate(&self) -> Result<()> {
+        self.basis.validate()?;
+        plausible::within("residual", self.residual.validate(&self.basis.joint_names))
+    }
+
     fn reference(&self, q: &[f64]) -> Reference {
         nominal_reference(&self.basis.dh, &self.basis.registration, q)
     }
@@ -576,6 +634,23 @@ impl HybridModel {
             &ctx.regression,
         )?;
         Ok(HybridModel { method, residual }.on(base))
+    }
+
+    /// A hybrid read from a file fits `base` (itself checked already): the name is the hybrid's on that base
+    /// and the correction is valid on the base's joints.
+    pub fn validate(&self, base: &dyn Fitted) -> Result<()> {
+        let want = HybridModel::on_base(base.info()).1;
+        if self.method != want {
+            return Err(plausible::invalid(
+                "method",
+                format!(
+                    "'{}' on a {} base; that hybrid is '{want}'",
+                    self.method,
+                    base.method()
+                ),
+            ));
+        }
+        plausible::within("residual", self.residual.validate(base.joint_names()))
     }
 
     /// This residual model on `base` (the one it was fitted against).

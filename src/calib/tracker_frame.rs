@@ -23,6 +23,7 @@ use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
+use crate::robot::plausible;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrackerFrame {
@@ -70,7 +71,40 @@ pub struct Observation {
     pub inputs: Vec<f64>,
 }
 
+impl TrackerFrame {
+    /// A frame read from a file is usable: a proper pose and mounting of plausible size, a finite RMS.
+    pub fn validate(&self) -> Result<()> {
+        plausible::pose("tracker_to_base", &self.tracker_to_base)?;
+        plausible::point("mounting", &self.mounting)?;
+        plausible::non_negative("rms", self.rms, plausible::MAX_LENGTH_M, "RMS in metres")
+    }
+}
+
 impl Registration {
+    /// A registration read from a file is usable ([`TrackerFrame::validate`]); a nest has at least the three
+    /// reflectors that measure an orientation, each at a plausible place; a probe rotation is a rotation.
+    pub fn validate(&self) -> Result<()> {
+        plausible::within("frame", self.frame.validate())?;
+        if let Some(nest) = &self.nest {
+            if nest.len() < 3 {
+                return Err(plausible::invalid(
+                    "nest",
+                    format!(
+                        "{} reflectors; a nest has at least 3 (null without one)",
+                        nest.len()
+                    ),
+                ));
+            }
+            for (k, p) in nest.iter().enumerate() {
+                plausible::point(&format!("nest[{k}]"), p)?;
+            }
+        }
+        if let Some(r) = &self.probe_rotation {
+            plausible::rotation("probe_rotation", r)?;
+        }
+        Ok(())
+    }
+
     /// Registers on the training and validation points together (everything a method may fit on; the test
     /// split stays untouched). The mounting guess comes from the `nom_*` columns when the data has them.
     pub fn fit(dh: &DhChain, train: &Dataset, val: &Dataset) -> Result<Registration> {

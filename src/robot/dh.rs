@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use super::chain::{Chain, JointKind};
 use super::kinematics::{Frames, forward_kinematics};
+use super::plausible;
 use crate::error::{Error, Result};
 
 /// One link of eq. 1. For a revolute joint θ = q + `theta_offset`; for a prismatic one d = `d` + q.
@@ -169,6 +170,24 @@ impl DhChain {
 
     pub fn dof(&self) -> usize {
         self.rows.len()
+    }
+
+    /// A table read from a file is usable: at least one row, every number finite, lengths and angles of a
+    /// plausible size ([`plausible`]), base and tool proper poses. Fields are named as the file writes them.
+    pub fn validate(&self) -> Result<()> {
+        if self.rows.is_empty() {
+            return Err(plausible::invalid("rows", "no joint"));
+        }
+        plausible::pose("base", &self.base)?;
+        plausible::pose("tool", &self.tool)?;
+        for (i, r) in self.rows.iter().enumerate() {
+            let field = |name: &str| format!("rows[{i}].{name}");
+            plausible::angle(&field("theta_offset"), r.theta_offset)?;
+            plausible::length(&field("d"), r.d)?;
+            plausible::length(&field("a"), r.a)?;
+            plausible::angle(&field("alpha"), r.alpha)?;
+        }
+        Ok(())
     }
 
     /// A_i(q_i) = Rz(q_i + theta_offset) Tz(d) Tx(a) Rx(alpha) (prismatic: d + q_i). Paper eq. 1.

@@ -8,6 +8,7 @@ pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+pub mod plausible;
 pub mod urdf;
 
 pub use chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Payload, Shape};

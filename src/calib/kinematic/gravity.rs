@@ -7,7 +7,12 @@ use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
 use crate::robot::dynamics::{GRAVITY, GravityJoint, gravity_pass};
 use crate::robot::kinematics::{Frames, forward_kinematics};
+use crate::robot::plausible;
 use crate::robot::{Chain, Payload};
+
+/// The largest gravity component (m/s²) a saved model may have: ten times the Earth's, which no robot cell
+/// sees, while a mistyped exponent is far beyond.
+pub const MAX_GRAVITY: f64 = 100.0;
 
 /// The nominal inertials re-expressed in the DH frames, so gravity torques need only the DH chain (and the
 /// saved model needs no URDF): body j + 1 (moved by joint j) in DH frame j + 1, the payload in the flange frame.
@@ -55,6 +60,32 @@ impl GravityModel {
             payload,
             gravity: [GRAVITY.x, GRAVITY.y, GRAVITY.z],
         })
+    }
+
+    /// A model read from a file can give torques on an `n`-joint chain: one mass and centre per joint, masses
+    /// in [0, [`plausible::MAX_MASS_KG`]], centres at plausible lengths, gravity finite and at most
+    /// `MAX_GRAVITY`.
+    pub fn validate(&self, n: usize) -> Result<()> {
+        plausible::count("masses", self.masses.len(), n, "joints")?;
+        plausible::count("coms", self.coms.len(), n, "joints")?;
+        let mass = |field: &str, m: f64| {
+            plausible::non_negative(field, m, plausible::MAX_MASS_KG, "mass in kg")
+        };
+        for (i, (&m, c)) in self.masses.iter().zip(&self.coms).enumerate() {
+            mass(&format!("masses[{i}]"), m)?;
+            plausible::lengths(&format!("coms[{i}]"), c)?;
+        }
+        mass("payload.mass", self.payload.mass)?;
+        plausible::lengths("payload.com", &self.payload.com)?;
+        for (k, &g) in self.gravity.iter().enumerate() {
+            plausible::bounded(
+                &format!("gravity[{k}]"),
+                g,
+                MAX_GRAVITY,
+                "acceleration in m/s²",
+            )?;
+        }
+        Ok(())
     }
 
     /// Gravity torques (Nm; N for a prismatic joint) at `q` of the nominal DH chain, as

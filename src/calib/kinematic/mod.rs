@@ -68,6 +68,11 @@ use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::robot::plausible;
+
+/// The largest |compliance| (rad/Nm; m/N for a prismatic joint) a saved model may have. Real joints deflect
+/// by 1e-5 to 1e-3 rad under a newton-metre; one that turned a radian would hold nothing.
+pub const MAX_COMPLIANCE: f64 = 1.0;
 
 /// Tunables of the fit; the defaults are what `fit` uses.
 #[derive(Clone, Debug)]
@@ -311,6 +316,101 @@ impl KinematicModel {
             train_rms_m: train_rms,
             validation_rms_m: validation_rms,
         })
+    }
+
+    /// A model read from a file can predict: its basis is valid ([`Basis::validate`]); one error row per DH
+    /// row, translations plausible lengths and rotations plausible angles; `elastic` has one compliance per
+    /// joint (at most [`MAX_COMPLIANCE`]) and a valid gravity model, `kinematic` neither; the kept
+    /// parameters belong to the chain, one value each; every reported number finite.
+    pub fn validate(&self) -> Result<()> {
+        self.basis.validate()?;
+        let n = self.basis.joint_names.len();
+        let elastic = self.method.name == ELASTIC.name;
+        plausible::count("errors", self.errors.len(), n, "DH rows (one per joint)")?;
+        for (i, row) in self.errors.iter().enumerate() {
+            for (k, &v) in row.iter().enumerate() {
+                let field = format!("errors[{i}][{k}]");
+                if k < 3 {
+                    plausible::length(&field, v)?;
+                } else {
+                    plausible::angle(&field, v)?;
+                }
+            }
+        }
+        match (elastic, &self.compliance, &self.gravity) {
+            (true, Some(c), Some(g)) => {
+                plausible::count("compliance", c.len(), n, "joints")?;
+                for (j, &v) in c.iter().enumerate() {
+                    plausible::bounded(
+                        &format!("compliance[{j}]"),
+                        v,
+                        MAX_COMPLIANCE,
+                        "compliance in rad/Nm",
+                    )?;
+                }
+                plausible::within("gravity", g.validate(n))?;
+            }
+            (false, None, None) => {}
+            (true, ..) => {
+                return Err(plausible::invalid(
+                    "compliance",
+                    "the elastic method needs both compliance and gravity",
+                ));
+            }
+            (false, ..) => {
+                return Err(plausible::invalid(
+                    "compliance",
+                    "the kinematic method has neither compliance nor gravity (null)",
+                ));
+            }
+        }
+        if let Some(l) = self.orientation_length_m {
+            plausible::non_negative(
+                "orientation_length_m",
+                l,
+                plausible::MAX_LENGTH_M,
+                "length in metres",
+            )?;
+        }
+        plausible::count(
+            "values",
+            self.values.len(),
+            self.kept.len(),
+            "kept parameters",
+        )?;
+        for (field, params) in [("kept", &self.kept), ("dropped", &self.dropped)] {
+            if let Some(i) = params.iter().position(|p| !p.belongs_to(n, elastic)) {
+                return Err(plausible::invalid(
+                    &format!("{field}[{i}]"),
+                    format!(
+                        "{:?} is not a parameter of {} on {n} joints",
+                        params[i], self.method.name
+                    ),
+                ));
+            }
+        }
+        for (i, &v) in self.values.iter().enumerate() {
+            plausible::length(&format!("values[{i}]"), v)?;
+        }
+        if self.rank > self.kept.len() {
+            return Err(plausible::invalid(
+                "rank",
+                format!(
+                    "{} is above the {} kept parameters",
+                    self.rank,
+                    self.kept.len()
+                ),
+            ));
+        }
+        plausible::finite("condition_number", self.condition_number)?;
+        let rms = |field: &str, v: f64| {
+            plausible::non_negative(field, v, plausible::MAX_LENGTH_M, "RMS in metres")
+        };
+        rms("train_rms_m", self.train_rms_m)?;
+        if let Some(v) = self.validation_rms_m {
+            rms("validation_rms_m", v)?;
+        }
+        Ok(())
     }
 
     /// Names of the kept parameters, in priority order.

@@ -29,6 +29,15 @@ impl Param {
         }
     }
 
+    /// Whether it is a parameter of an `n`-joint chain (compliances only when `elastic`).
+    pub fn belongs_to(&self, n: usize, elastic: bool) -> bool {
+        match *self {
+            Param::TrackerRotation(k) | Param::TrackerTranslation(k) | Param::Mounting(k) => k < 3,
+            Param::Error(e) => (1..=n).contains(&e.frame) && (1..=6).contains(&e.component),
+            Param::Compliance(j) => elastic && j < n,
+        }
+    }
+
     pub(super) fn is_compliance(&self) -> bool {
         matches!(self, Param::Compliance(_))
     }
