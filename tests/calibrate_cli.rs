@@ -57,6 +57,19 @@ fn calibrate(args: &[&OsStr]) -> Output {
     run_bin(env!("CARGO_BIN_EXE_calibrate"), args)
 }
 
+/// `calibrate apply --model MODEL --data DATA --out OUT`.
+fn apply_model(model: &Path, data: &Path, out: &Path) -> Output {
+    calibrate(&[
+        "apply".as_ref(),
+        "--model".as_ref(),
+        model.as_os_str(),
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ])
+}
+
 /// `calibrate --data DATA --out OUT` plus `extra`; must succeed. Returns stdout.
 fn fit_ok(data: &Path, out: &Path, extra: &[&str]) -> String {
     let mut args: Vec<&OsStr> = vec![
@@ -452,15 +465,7 @@ fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
     let model = out.join("model.json");
     let apply_dir = dir.path().join("apply");
     let applied = apply_dir.join("applied.csv");
-    let output = calibrate(&[
-        "apply".as_ref(),
-        "--model".as_ref(),
-        model.as_os_str(),
-        "--data".as_ref(),
-        data.as_os_str(),
-        "--out".as_ref(),
-        applied.as_os_str(),
-    ]);
+    let output = apply_model(&model, data, &applied);
     assert!(
         output.status.success(),
         "apply failed: {}",
@@ -656,15 +661,11 @@ fn apply_with_a_file_that_is_not_a_model_is_one_line() {
         data.join("campaign.json"),
         data.join("measurements.csv"),
     ] {
-        let output = calibrate(&[
-            "apply".as_ref(),
-            "--model".as_ref(),
-            not_a_model.as_os_str(),
-            "--data".as_ref(),
-            data.join("measurements.csv").as_os_str(),
-            "--out".as_ref(),
-            apply_dir.join("applied.csv").as_os_str(),
-        ]);
+        let output = apply_model(
+            &not_a_model,
+            &data.join("measurements.csv"),
+            &apply_dir.join("applied.csv"),
+        );
         let name = not_a_model.file_name().unwrap().to_str().unwrap();
         assert_clean_failure(&output, &apply_dir, &[name]);
     }
@@ -712,15 +713,7 @@ fn apply_reports_a_singular_configuration_per_row() {
     )
     .unwrap();
     let applied = dir.path().join("applied.csv");
-    let output = calibrate(&[
-        "apply".as_ref(),
-        "--model".as_ref(),
-        fitted.join("model.json").as_os_str(),
-        "--data".as_ref(),
-        joints.as_os_str(),
-        "--out".as_ref(),
-        applied.as_os_str(),
-    ]);
+    let output = apply_model(&fitted.join("model.json"), &joints, &applied);
     assert!(
         output.status.success(),
         "{}",
@@ -774,15 +767,7 @@ fn apply_refuses_a_model_that_does_not_fit_itself() {
     let data = campaign(&dir, "paper", &small_paper(40)).join("measurements.csv");
     let apply = |model: &Path, name: &str| {
         let out = dir.path().join(format!("apply_{name}"));
-        let output = calibrate(&[
-            "apply".as_ref(),
-            "--model".as_ref(),
-            model.as_os_str(),
-            "--data".as_ref(),
-            data.as_os_str(),
-            "--out".as_ref(),
-            out.join("applied.csv").as_os_str(),
-        ]);
+        let output = apply_model(model, &data, &out.join("applied.csv"));
         (output, out)
     };
     type Change = fn(&mut Value);
