@@ -14,6 +14,7 @@ mod kinematic;
 mod magnitudes;
 mod real_data;
 mod recording;
+mod replay;
 mod report;
 mod residual;
 mod robot;

@@ -30,6 +30,7 @@ fn config(position_m: [f64; 3], yaw_deg: f64) -> TrackerConfig {
         range_sigma_per_m: 0.0,
         angle_sigma_rad: 0.0,
         acceptance_half_angle_deg: 30.0,
+        orientation_sigma_rad: 0.0,
     }
 }
 

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use serde::Serialize;
 use serde_json::json;
 
 use crate::campaign::Simulation;
@@ -22,6 +23,17 @@ pub struct Options {
     /// Keep the wall-clock fit times in the study's `fit_ms` column (otherwise NaN, so that the files are
     /// byte-identical for the same scenario whatever the machine and thread count).
     pub timings: bool,
+    /// Replay this real campaign instead of the scenario's regions (its `[evaluation]` and `[study]` are not
+    /// run then).
+    pub replay: Option<ReplaySource>,
+}
+
+/// A real campaign to replay: the file, and the column mapping it is read through (a `measurements.csv`
+/// without one).
+#[derive(Clone, Debug)]
+pub struct ReplaySource {
+    pub file: PathBuf,
+    pub mapping: Option<PathBuf>,
 }
 
 /// What the job did, for the binary to print.
@@ -35,15 +47,41 @@ pub struct CampaignRun {
     pub budget: Budget,
     pub evaluation: Option<(Evaluation, Duration)>,
     pub study: Option<(StudyResult, Duration)>,
+    /// With `--replay`: what placed the tracker and the reflector.
+    pub replay: Option<ReplayReport>,
     /// Where the files went.
     pub out: PathBuf,
 }
 
 /// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
 /// `evaluation.json` and the study's files, into the output directory, all or none.
-pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
+pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     let started = Instant::now();
-    let sim = super::simulate(&scenario)?;
+    let (sim, replay) = match &options.replay {
+        None => (super::simulate(&scenario)?, None),
+        Some(source) => {
+            let data = super::replay::read(
+                &scenario.load_robot()?,
+                &source.file,
+                source.mapping.as_deref(),
+            )?;
+            let replay = super::replay::replay(&mut scenario, &data)?;
+            let frame = &replay.registration.frame;
+            let report = ReplayReport {
+                file: source.file.clone(),
+                mapping: source.mapping.clone(),
+                rows: data.len(),
+                registration_rms_m: frame.rms,
+                mounting_m: frame.mounting.coords.into(),
+                placement_residual_rad: replay.placement_residual_rad,
+            };
+            (replay.sim, Some(report))
+        }
+    };
+    if replay.is_some() {
+        scenario.evaluation = None;
+        scenario.study = None;
+    }
     let generated = started.elapsed();
     let world = &sim.world;
     let campaign = &sim.campaign;
@@ -76,6 +114,11 @@ pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
             "rigid_only": budget.rigid_only.scaled(1e3),
         },
     });
+    let mut report = report;
+    if let Some(r) = &replay {
+        report["replay"] =
+            serde_json::to_value(r).map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
+    }
     let mut files: Vec<(String, Vec<u8>)> = vec![
         (
             "measurements.csv".into(),
@@ -124,8 +167,24 @@ pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         budget,
         evaluation,
         study,
+        replay,
         out,
     })
+}
+
+/// How a replay placed the simulated tracker and reflector (`campaign.json`'s `replay`).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplayReport {
+    pub file: PathBuf,
+    pub mapping: Option<PathBuf>,
+    pub rows: usize,
+    /// RMS of the registration of the real data on the nominal robot (m): how far the nominal robot is from
+    /// the real one, with the real tracker's noise.
+    pub registration_rms_m: f64,
+    /// The registered point on the flange, the simulated reflector's nominal position (m).
+    pub mounting_m: [f64; 3],
+    /// The angle between the registered tracker rotation and the scenario's yaw and tilts written from it (rad).
+    pub placement_residual_rad: f64,
 }
 
 fn to_json(name: &str, value: &impl serde::Serialize) -> Result<Vec<u8>> {

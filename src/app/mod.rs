@@ -7,6 +7,7 @@
 pub mod calibrate;
 pub mod campaign;
 pub mod real_data;
+pub mod replay;
 
 use crate::campaign::{Generator, Simulation};
 use crate::design::DOptimal;

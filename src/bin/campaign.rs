@@ -1,14 +1,16 @@
-//! `campaign [SCENARIO.toml] [--out DIR] [--threads N]`: simulates a laser-tracker campaign of a robot
-//! whose true errors are known, and writes `measurements.csv`, `truth.csv` and `campaign.json`; with an
-//! `[evaluation]` section it then fits the listed methods, judges them against the truth and writes
-//! `evaluation.json` beside them.
+//! `campaign [SCENARIO.toml] [--out DIR] [--threads N] [--replay FILE [--mapping MAP]]`: simulates a
+//! laser-tracker campaign of a robot whose true errors are known, and writes `measurements.csv`, `truth.csv`
+//! and `campaign.json`; with an `[evaluation]` section it then fits the listed methods, judges them against
+//! the truth and writes `evaluation.json` beside them. `--replay` measures a real campaign's joint
+//! configurations instead of the scenario's regions, in the file's order, with the tracker where the real one
+//! stood.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
 
-use calibench::app::campaign::{self, CampaignRun, Options};
+use calibench::app::campaign::{self, CampaignRun, Options, ReplaySource};
 use calibench::eval::Stats;
 use calibench::scenario::Scenario;
 use calibench::{Error, Result};
@@ -35,6 +37,16 @@ struct Args {
     /// benchmarks (`cargo bench`) measure fit times properly.
     #[arg(long)]
     timings: bool,
+    /// Measure the joint configurations of this real campaign file, in its order, instead of the scenario's
+    /// regions (no evaluation or study then). The tracker and the reflector are placed by registering the
+    /// file's measurements on the nominal robot; every row is measured, even where the simulated acceptance
+    /// cone or an obstacle would refuse it.
+    #[arg(long, value_name = "FILE")]
+    replay: Option<PathBuf>,
+    /// Column mapping the replayed file is read through (as `calibrate --mapping`); without it the file is
+    /// read as a `measurements.csv`.
+    #[arg(long, value_name = "MAP", requires = "replay")]
+    mapping: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -65,6 +77,10 @@ fn run(args: &Args) -> Result<()> {
     let options = Options {
         out: args.out.clone(),
         timings: args.timings,
+        replay: args.replay.clone().map(|file| ReplaySource {
+            file,
+            mapping: args.mapping.clone(),
+        }),
     };
     let done = campaign::run(scenario, &options)?;
     print(&done);
@@ -106,6 +122,28 @@ fn print(done: &CampaignRun) {
     row("true, all systematic errors", &done.budget.all_systematic);
     row("true, elastic deflection only", &done.budget.elastic_only);
     row("true, rigid errors only", &done.budget.rigid_only);
+    if let Some(r) = &done.replay {
+        let t = &done.scenario.tracker;
+        let m = r.mounting_m.map(|v| v * 1e3);
+        println!(
+            "replayed {} rows of {}: real data registered with RMS {:.4} mm; tracker placed at [{:.4}, {:.4}, {:.4}] m, \
+             yaw {:.4}°, tilts [{:.4}, {:.4}]° (decomposition residual {:.1e} rad); reflector at \
+             [{:.3}, {:.3}, {:.3}] mm on the flange",
+            r.rows,
+            r.file.display(),
+            r.registration_rms_m * 1e3,
+            t.position_m[0],
+            t.position_m[1],
+            t.position_m[2],
+            t.yaw_deg,
+            t.tilt_deg[0],
+            t.tilt_deg[1],
+            r.placement_residual_rad,
+            m[0],
+            m[1],
+            m[2]
+        );
+    }
     if let Some((evaluation, took)) = &done.evaluation {
         print!("{}", evaluation.table());
         println!(

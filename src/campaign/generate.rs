@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::region::{CampaignConfig, RegionConfig};
+use super::sequence::Visit;
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
@@ -21,7 +22,7 @@ use crate::truth::{DeflectionSolver, TrueState};
 use crate::world::World;
 
 /// The last millimetres of a beam lie inside the reflector's own mount, which must not count as blocking.
-const BEAM_END_CLEARANCE_M: f64 = 0.005;
+pub(super) const BEAM_END_CLEARANCE_M: f64 = 0.005;
 /// Retries with more candidates when too few are feasible; the candidate count never exceeds this multiple.
 const MAX_ATTEMPTS: u64 = 5;
 const MAX_CANDIDATE_FACTOR: usize = 50;
@@ -154,29 +155,29 @@ struct Planned {
 }
 
 /// Per-thread workspaces.
-struct Work {
+pub(super) struct Work {
     ik: IkSolver,
-    frames: Frames,
-    state: TrueState,
+    pub(super) frames: Frames,
+    pub(super) state: TrueState,
 }
 
 impl Generator<'_> {
-    /// Generates the campaign over all regions; points are numbered from 0 in region order.
+    /// Generates the campaign over all regions; points are numbered from 0 in region order, which is the order
+    /// the arm visits them in. Each region's layout, inverse kinematics and feasibility choose its points; the
+    /// chosen commands are then measured as one sequence ([`Generator::measure_sequence`]), the path a replayed
+    /// real campaign takes too.
     pub fn run(&self, regions: &[RegionConfig]) -> Result<Campaign> {
         let collision = CollisionModel::new(&self.world.nominal);
-        let mut points = Vec::new();
+        let mut visits = Vec::new();
         let mut rejections = BTreeMap::new();
         for (r, region) in regions.iter().enumerate() {
-            let (mut region_points, counts) = self.region(r as u64, region, &collision)?;
-            for p in &mut region_points {
-                p.id = points.len();
-                points.push(p.clone());
-            }
+            let (region_visits, counts) = self.region(r as u64, region, &collision)?;
+            visits.extend(region_visits);
             rejections.insert(region.name.clone(), counts);
         }
         Ok(Campaign {
             joint_names: self.world.nominal.joint_names(),
-            points,
+            points: self.measure_sequence(&visits)?,
             rejections,
         })
     }
@@ -186,7 +187,7 @@ impl Generator<'_> {
         r: u64,
         region: &RegionConfig,
         collision: &CollisionModel,
-    ) -> Result<(Vec<CampaignPoint>, Rejections)> {
+    ) -> Result<(Vec<Visit>, Rejections)> {
         let anchor = self.anchor(region)?;
         let want = region.points;
         let selects = region.distribution.selects();
@@ -251,12 +252,7 @@ impl Generator<'_> {
     }
 
     /// The `want` feasible points of `pool` that a model-based layout chooses, in pool order.
-    fn select(
-        &self,
-        region: &RegionConfig,
-        pool: Vec<CampaignPoint>,
-        want: usize,
-    ) -> Result<Vec<CampaignPoint>> {
+    fn select(&self, region: &RegionConfig, pool: Vec<Visit>, want: usize) -> Result<Vec<Visit>> {
         let selector = self.selector.ok_or_else(|| {
             Error::Invalid(format!(
                 "region '{}': layout '{}' chooses its points for a model, and no model was given",
@@ -268,10 +264,11 @@ impl Generator<'_> {
         let chosen = selector
             .choose(&commands, want)
             .map_err(|e| Error::Unreachable(format!("region '{}': {}", region.name, e.detail())))?;
-        let mut pool: Vec<Option<CampaignPoint>> = pool.into_iter().map(Some).collect();
+        let mut pool: Vec<Option<Visit>> = pool.into_iter().map(Some).collect();
         Ok(chosen.into_iter().filter_map(|i| pool[i].take()).collect())
     }
 
+    /// The feasible candidates of one attempt, as the visits that would measure them, in layout order.
     fn candidates(
         &self,
         r: u64,
@@ -280,12 +277,12 @@ impl Generator<'_> {
         anchor: &[f64],
         unit: &[[f64; 3]],
         collision: &CollisionModel,
-    ) -> Result<(Vec<CampaignPoint>, Rejections)> {
+    ) -> Result<(Vec<Visit>, Rejections)> {
         let planned = self.plan_all(r, attempt, region, anchor, unit, collision);
 
         let deflected = self.deflect_planned(&planned)?;
 
-        let outcomes: Vec<std::result::Result<CampaignPoint, Reason>> = planned
+        let outcomes: Vec<std::result::Result<Visit, Reason>> = planned
             .into_par_iter()
             .zip(deflected.into_par_iter())
             .enumerate()
@@ -294,7 +291,13 @@ impl Generator<'_> {
                 |work, (i, (plan, q_link))| {
                     let plan = plan?;
                     let q_link = q_link.expect("a planned command always has a deflection");
-                    self.measure(r, attempt, i as u64, region, plan, &q_link, collision, work)
+                    let stream = [r, attempt, i as u64];
+                    self.visible(stream, &q_link, collision, work)?;
+                    Ok(Visit {
+                        region: region.name.clone(),
+                        q_cmd: plan.q_cmd,
+                        stream,
+                    })
                 },
             )
             .collect();
@@ -379,7 +382,7 @@ impl Generator<'_> {
     }
 
     /// A per-thread workspace of the planning and measuring steps.
-    fn work(&self) -> Work {
+    pub(super) fn work(&self) -> Work {
         Work {
             ik: IkSolver::new(&self.world.nominal, self.ik_options()),
             frames: Frames::new(&self.world.nominal),
@@ -536,7 +539,10 @@ impl Generator<'_> {
         self.deflect_all(&unloaded)
     }
 
-    fn deflect_all(&self, unloaded: &[Option<Vec<f64>>]) -> Result<Vec<Option<Vec<f64>>>> {
+    pub(super) fn deflect_all(
+        &self,
+        unloaded: &[Option<Vec<f64>>],
+    ) -> Result<Vec<Option<Vec<f64>>>> {
         match self.world.deflection() {
             DeflectionSolver::FixedPoint => unloaded
                 .par_iter()
@@ -569,64 +575,32 @@ impl Generator<'_> {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn measure(
+    /// Whether the tracker sees every reflector of the true arm at `q_link` (deflected link angles), with the
+    /// repeatability draw of the visit keyed `stream` (the one its measurement will make): each reflector's
+    /// acceptance cone faces the tracker, and no link blocks the beam.
+    fn visible(
         &self,
-        r: u64,
-        attempt: u64,
-        i: u64,
-        region: &RegionConfig,
-        plan: Planned,
+        stream: [u64; 3],
         q_link: &[f64],
         collision: &CollisionModel,
         work: &mut Work,
-    ) -> std::result::Result<CampaignPoint, Reason> {
-        let mut rng = derive(self.seed, Stream::Measurement, &[r, attempt, i]);
+    ) -> std::result::Result<(), Reason> {
+        let mut rng = derive(self.seed, Stream::Measurement, &stream);
         self.world
             .robot
             .reach_with_angles(q_link, Some(&mut rng), &mut work.state);
         let true_flange = work.state.frames.flange;
         let origin = self.world.tracker.origin();
         let facing = true_flange.rotation * self.world.mounting.facing;
-        let true_reflectors: Vec<Point3<f64>> = self
-            .world
-            .mounting
-            .actual
-            .iter()
-            .map(|p| true_flange * p)
-            .collect();
-        for p in &true_reflectors {
-            if !self.world.tracker.in_acceptance_cone(p, &facing) {
+        for local in &self.world.mounting.actual {
+            let p = true_flange * local;
+            if !self.world.tracker.in_acceptance_cone(&p, &facing) {
                 return Err(Reason::AcceptanceCone);
             }
-            if collision.segment_blocked(&work.state.frames, &origin, p, BEAM_END_CLEARANCE_M) {
+            if collision.segment_blocked(&work.state.frames, &origin, &p, BEAM_END_CLEARANCE_M) {
                 return Err(Reason::LineOfSight);
             }
         }
-        let measured = true_reflectors
-            .iter()
-            .map(|p| self.world.tracker.measure(p, &mut rng))
-            .collect();
-        Ok(CampaignPoint {
-            id: 0,
-            region: region.name.clone(),
-            nominal_reflectors: self
-                .world
-                .mounting
-                .nominal
-                .iter()
-                .map(|p| plan.nominal_flange * p)
-                .collect(),
-            q_cmd: plan.q_cmd,
-            nominal_flange: plan.nominal_flange,
-            measured,
-            true_flange,
-            true_in_tracker: true_reflectors
-                .iter()
-                .map(|p| self.world.tracker.pose.inverse_transform_point(p))
-                .collect(),
-            true_reflectors,
-            q_true: work.state.q.clone(),
-        })
+        Ok(())
     }
 }

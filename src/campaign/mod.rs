@@ -5,10 +5,12 @@
 pub mod distribution;
 pub mod generate;
 pub mod region;
+pub mod sequence;
 
 pub use distribution::{DistributionKind, PointDistribution};
 pub use generate::{Campaign, CampaignPoint, Generator, Rejections, Selector};
 pub use region::{CampaignConfig, RegionConfig};
+pub use sequence::Visit;
 
 use crate::world::World;
 

@@ -38,6 +38,41 @@ pub struct TrackerConfig {
     /// Half angle of the reflector's acceptance cone, deg.
     #[serde(default = "default_cone")]
     pub acceptance_half_angle_deg: f64,
+    /// Noise of a 6-DoF probe's measured orientation, rad (1σ per axis); only a replay of a campaign that
+    /// measured a probe's orientation uses it.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub orientation_sigma_rad: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+impl TrackerConfig {
+    /// This configuration with the tracker frame at `pose` (tracker frame in the world frame), written as
+    /// position, yaw and tilts: `Rz(yaw)·Ry(tilt_y)·Rx(tilt_x)` is a complete Euler decomposition, so any
+    /// rotation is represented. Returns the angle (rad) between `pose`'s rotation and the one the fields give
+    /// back, the round-off of the decomposition.
+    pub fn placed_at(&self, pose: &Isometry3<f64>) -> (TrackerConfig, f64) {
+        let (roll, pitch, yaw) = pose.rotation.euler_angles();
+        let config = TrackerConfig {
+            position_m: pose.translation.vector.into(),
+            yaw_deg: yaw.to_degrees(),
+            tilt_deg: [roll.to_degrees(), pitch.to_degrees()],
+            ..self.clone()
+        };
+        let residual = (config.rotation().inverse() * pose.rotation).angle();
+        (config, residual)
+    }
+
+    /// The rotation of the tracker frame in the world frame.
+    fn rotation(&self) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_euler_angles(
+            self.tilt_deg[0].to_radians(),
+            self.tilt_deg[1].to_radians(),
+            self.yaw_deg.to_radians(),
+        )
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -74,11 +109,13 @@ impl Tracker {
                 "acceptance_half_angle_deg must lie in (0, 90), got {cone}"
             ));
         }
-        let rotation = UnitQuaternion::from_euler_angles(
-            c.tilt_deg[0].to_radians(),
-            c.tilt_deg[1].to_radians(),
-            c.yaw_deg.to_radians(),
-        );
+        if !(c.orientation_sigma_rad.is_finite() && c.orientation_sigma_rad >= 0.0) {
+            return bad(&format!(
+                "orientation_sigma_rad must be finite and non-negative, got {}",
+                c.orientation_sigma_rad
+            ));
+        }
+        let rotation = c.rotation();
         let [x, y, z] = c.position_m;
         Ok(Tracker {
             pose: Isometry3::from_parts(Translation3::new(x, y, z), rotation),
@@ -117,6 +154,19 @@ impl Tracker {
         let (sa, ca) = az.sin_cos();
         let (se, ce) = el.sin_cos();
         Point3::new(r * ce * ca, r * ce * sa, r * se)
+    }
+
+    /// A 6-DoF probe's measured orientation, in the TRACKER frame, of a probe whose frame has rotation `world`
+    /// in the world frame: the frame change and a rotation vector of `orientation_sigma_rad` per axis. Three
+    /// standard normals are drawn whatever the sigma, as in [`Tracker::measure`].
+    pub fn measure_orientation(
+        &self,
+        world: &UnitQuaternion<f64>,
+        rng: &mut ChaCha8Rng,
+    ) -> UnitQuaternion<f64> {
+        let noise = Vector3::from_fn(|_, _| rng.sample::<f64, _>(StandardNormal))
+            * self.config.orientation_sigma_rad;
+        self.pose.rotation.inverse() * world * UnitQuaternion::from_scaled_axis(noise)
     }
 
     /// Whether the reflector, facing along `facing` (world), returns the beam: the direction from the reflector

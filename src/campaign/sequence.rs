@@ -1,0 +1,208 @@
+//! The measured sequence: the arm visits its commands one after the other and the tracker measures each
+//! stop. A planned campaign ([`Generator::run`]) and a replayed real one ([`Generator::replay`]) both end
+//! here, so whatever makes the true arm depend on its place in the sequence applies to both alike.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Point3;
+use rayon::prelude::*;
+
+use super::generate::{Campaign, CampaignPoint, Generator, Rejections};
+use crate::error::{Error, Result};
+use crate::rng::{Stream, derive};
+use crate::robot::Chain;
+use crate::robot::kinematics::forward_kinematics;
+
+/// A replayed campaign draws its noise with this as the attempt index: above the planned campaigns' attempts
+/// and the ground-truth sets' (`GROUND_TRUTH_ATTEMPT + set`), so it never shares their streams.
+pub const REPLAY_ATTEMPT: u64 = 1 << 33;
+
+/// One stop of the arm's visit sequence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Visit {
+    /// The region (or replayed file) the point belongs to, for `measurements.csv`.
+    pub region: String,
+    /// Commanded joint angles (rad).
+    pub q_cmd: Vec<f64>,
+    /// The indices the visit's repeatability and tracker noise derive from, with the generator's seed:
+    /// (region, attempt, candidate) for a planned point, so that a point draws the same whatever else the
+    /// campaign measures; (0, [`REPLAY_ATTEMPT`], row) for a replayed one.
+    pub stream: [u64; 3],
+}
+
+impl Generator<'_> {
+    /// Measures `visits` in their order: the true arm reaches each command (zero offsets, transmission error,
+    /// static deflection, repeatability) and the tracker measures its reflectors. No feasibility is checked
+    /// here: a planned campaign chose its visits by their feasibility, and a replayed one was measured. Points
+    /// are numbered from 0 in visit order.
+    pub fn measure_sequence(&self, visits: &[Visit]) -> Result<Vec<CampaignPoint>> {
+        let dof = self.world.nominal.dof();
+        if let Some((k, v)) = visits
+            .iter()
+            .enumerate()
+            .find(|(_, v)| v.q_cmd.len() != dof || v.q_cmd.iter().any(|q| !q.is_finite()))
+        {
+            return Err(Error::Invalid(format!(
+                "visit {k}: the command {:?} must hold {dof} finite joint angles",
+                v.q_cmd
+            )));
+        }
+        let unloaded: Vec<Option<Vec<f64>>> = (0..visits.len())
+            .into_par_iter()
+            .map_init(
+                || vec![0.0; dof],
+                |q0, k| {
+                    self.unloaded(visits, k, q0);
+                    Some(q0.clone())
+                },
+            )
+            .collect();
+        let deflected = self.deflect_all(&unloaded)?;
+        Ok(visits
+            .par_iter()
+            .zip(deflected)
+            .enumerate()
+            .map_init(
+                || self.work(),
+                |work, (k, (visit, q_link))| {
+                    let q_link = q_link.expect("every visit has unloaded angles");
+                    let mut rng = derive(self.seed, Stream::Measurement, &visit.stream);
+                    // Repeatability first, then the tracker, from one stream: the order the feasibility
+                    // check of a planned point draws in, so the check saw the pose measured here.
+                    self.world
+                        .robot
+                        .reach_with_angles(&q_link, Some(&mut rng), &mut work.state);
+                    let true_flange = work.state.frames.flange;
+                    let true_reflectors: Vec<Point3<f64>> = self
+                        .world
+                        .mounting
+                        .actual
+                        .iter()
+                        .map(|p| true_flange * p)
+                        .collect();
+                    let measured = true_reflectors
+                        .iter()
+                        .map(|p| self.world.tracker.measure(p, &mut rng))
+                        .collect();
+                    forward_kinematics(&self.world.nominal, &visit.q_cmd, &mut work.frames);
+                    let nominal_flange = work.frames.flange;
+                    CampaignPoint {
+                        id: k,
+                        region: visit.region.clone(),
+                        q_cmd: visit.q_cmd.clone(),
+                        nominal_flange,
+                        nominal_reflectors: self
+                            .world
+                            .mounting
+                            .nominal
+                            .iter()
+                            .map(|p| nominal_flange * p)
+                            .collect(),
+                        measured,
+                        true_flange,
+                        true_in_tracker: true_reflectors
+                            .iter()
+                            .map(|p| self.world.tracker.pose.inverse_transform_point(p))
+                            .collect(),
+                        true_reflectors,
+                        q_true: work.state.q.clone(),
+                    }
+                },
+            )
+            .collect())
+    }
+
+    /// The arm's unloaded joint angles at the `k`-th visit. What makes the true arm depend on its place in the
+    /// sequence (the previous command for hysteresis, the index for a warm-up) enters here, so that planned
+    /// and replayed campaigns get it alike.
+    fn unloaded(&self, visits: &[Visit], k: usize, out: &mut [f64]) {
+        self.world.robot.unloaded_angles(&visits[k].q_cmd, out);
+    }
+
+    /// A real campaign's commands measured in this world, in their order, as region `region`: no layout, no
+    /// inverse kinematics and no feasibility check — the real tracker measured these points, so they are
+    /// measured even where the simulated acceptance cone, line of sight or an obstacle would refuse them. A
+    /// command outside the robot's joint limits (or with the wrong number of angles) is an error naming its
+    /// row of `origin` as a spreadsheet numbers it (the header is row 1) and its point id `ids[k]`.
+    pub fn replay(
+        &self,
+        origin: &str,
+        region: &str,
+        ids: &[String],
+        commands: &[Vec<f64>],
+    ) -> Result<Campaign> {
+        let chain = &self.world.nominal;
+        check_replayable(chain, origin, ids, commands)?;
+        let visits: Vec<Visit> = commands
+            .iter()
+            .enumerate()
+            .map(|(k, q)| Visit {
+                region: region.to_string(),
+                q_cmd: q.clone(),
+                stream: [0, REPLAY_ATTEMPT, k as u64],
+            })
+            .collect();
+        let n = visits.len();
+        Ok(Campaign {
+            joint_names: chain.joint_names(),
+            points: self.measure_sequence(&visits)?,
+            rejections: BTreeMap::from([(
+                region.to_string(),
+                Rejections {
+                    candidates: n,
+                    feasible: n,
+                    used: n,
+                    ..Rejections::default()
+                },
+            )]),
+        })
+    }
+}
+
+/// Whether `commands` (rows `ids` of `origin`) can be replayed on `chain`: at least one, each with one angle per
+/// joint, finite and within the joint's limits. The error names the first row that is not.
+pub fn check_replayable(
+    chain: &Chain,
+    origin: &str,
+    ids: &[String],
+    commands: &[Vec<f64>],
+) -> Result<()> {
+    let err = |message: String| Error::Data {
+        origin: origin.to_string(),
+        message,
+    };
+    if ids.len() != commands.len() {
+        return Err(err(format!(
+            "{} row ids for {} commands",
+            ids.len(),
+            commands.len()
+        )));
+    }
+    if commands.is_empty() {
+        return Err(err("no rows to replay".into()));
+    }
+    for (k, (id, q)) in ids.iter().zip(commands).enumerate() {
+        let row = if *id == (k + 2).to_string() {
+            format!("row {id}")
+        } else {
+            format!("row {} (point_id {id})", k + 2)
+        };
+        if q.len() != chain.dof() {
+            return Err(err(format!(
+                "{row}: {} joint angles, the robot has {} joints",
+                q.len(),
+                chain.dof()
+            )));
+        }
+        for (joint, &v) in chain.joints.iter().zip(q) {
+            if !(v.is_finite() && joint.within_limits(v)) {
+                return Err(err(format!(
+                    "{row}: joint {} = {v} is outside its limits [{}, {}] (URDF); a replay \
+                         measures every row, so a file the robot cannot have measured is refused",
+                    joint.name, joint.lower, joint.upper
+                )));
+            }
+        }
+    }
+    Ok(())
+}

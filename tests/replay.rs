@@ -1,0 +1,241 @@
+//! Replaying a campaign (`campaign SCENARIO --replay FILE [--mapping MAP]`): the real UR10 series C is measured
+//! in the simulation with exactly its configurations in its order; a tracker pose and reflector offset known
+//! from a simulated campaign are recovered by the replay's placement; every row is measured, even where the
+//! simulated acceptance cone would refuse it; a row outside the joint limits is one error naming it.
+
+use std::path::{Path, PathBuf};
+
+use tempfile::TempDir;
+
+use calibench::app::campaign::{self, Options, ReplaySource};
+use calibench::dataset::Dataset;
+use calibench::dataset::mapping::ColumnMapping;
+use calibench::robot::urdf;
+use calibench::scenario::Scenario;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn series_c() -> PathBuf {
+    root().join("../shared/data/ipa-ur10/Series_C/measurements_random_poses.csv")
+}
+
+fn ur10_ipa() -> Scenario {
+    let mut s =
+        Scenario::load(root().join("scenarios/ur10_ipa.toml")).expect("the shipped scenario");
+    s.robot.urdf = root().join("robots/ur10.urdf");
+    s
+}
+
+fn replay(
+    scenario: Scenario,
+    file: &Path,
+    mapping: Option<PathBuf>,
+    out: &Path,
+) -> campaign::CampaignRun {
+    campaign::run(
+        scenario,
+        &Options {
+            out: Some(out.to_path_buf()),
+            replay: Some(ReplaySource {
+                file: file.to_path_buf(),
+                mapping,
+            }),
+            ..Options::default()
+        },
+    )
+    .expect("the replay runs")
+}
+
+#[test]
+fn a_replay_measures_the_real_configurations_in_the_files_order() {
+    let dir = TempDir::new().unwrap();
+    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
+    let real = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml"))
+        .unwrap()
+        .read(&series_c(), &chain)
+        .unwrap();
+    let done = replay(
+        ur10_ipa(),
+        &series_c(),
+        Some(root().join("mappings/ipa_ur10.toml")),
+        dir.path(),
+    );
+    let sim = Dataset::read(&dir.path().join("measurements.csv"), &chain.joint_names()).unwrap();
+    assert_eq!(sim.len(), 2773);
+    // Bit for bit, row by row: the file's configurations in the file's order.
+    assert_eq!(sim.q, real.q);
+    assert_eq!(
+        sim.point_ids,
+        (0..2773).map(|i| i.to_string()).collect::<Vec<_>>()
+    );
+    // The simulated tracker stands where the real one did: the real and simulated measurements of the same
+    // configuration lie as far apart as the nominal robot is from the real one (the registration's ~1 mm),
+    // not metres.
+    let far = real
+        .measured
+        .iter()
+        .zip(&sim.measured)
+        .map(|(a, b)| (a[0] - b[0]).norm())
+        .fold(0.0, f64::max);
+    assert!(far < 0.01, "real and replayed points {far} m apart");
+    let r = done.replay.expect("a replay report");
+    assert!(
+        r.placement_residual_rad < 1e-12,
+        "{}",
+        r.placement_residual_rad
+    );
+    assert!(
+        (r.mounting_m[2] - 0.0928).abs() < 1e-3,
+        "{:?}",
+        r.mounting_m
+    );
+}
+
+/// A world whose true robot is its nominal one and whose tracker is exact: a registration recovers the tracker
+/// pose and the reflector offset exactly, whatever they are.
+fn exact_world(yaw: f64, tilt: [f64; 2], position: [f64; 3], reflector: [f64; 3]) -> Scenario {
+    let mut s = ur10_ipa();
+    let t = &mut s.truth;
+    (
+        t.frame_translation_m,
+        t.frame_rotation_rad,
+        t.joint_zero_rad,
+    ) = (0.0, 0.0, 0.0);
+    (t.base_translation_m, t.base_rotation_rad) = (0.0, 0.0);
+    t.stiffness_nm_per_rad = vec![1e12; 6];
+    (
+        t.stiffness_spread,
+        t.gear_amplitude_rad,
+        t.repeatability_rad,
+    ) = (0.0, 0.0, 0.0);
+    let k = &mut s.tracker;
+    (k.range_sigma_m, k.range_sigma_per_m, k.angle_sigma_rad) = (0.0, 0.0, 0.0);
+    (k.position_m, k.yaw_deg, k.tilt_deg) = (position, yaw, tilt);
+    s.reflectors.nominal_m = vec![reflector];
+    s
+}
+
+#[test]
+fn the_replay_places_the_tracker_and_the_reflector_where_they_were() {
+    let dir = TempDir::new().unwrap();
+    let (position, yaw, tilt, reflector) =
+        ([0.9, 3.1, 1.4], -23.0, [1.5, -2.5], [0.004, -0.003, 0.085]);
+    let planned = campaign::run(
+        exact_world(yaw, tilt, position, reflector),
+        &Options {
+            out: Some(dir.path().join("planned")),
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let known = planned.sim.world.tracker.pose;
+    // Replayed in a world whose tracker and reflector stand elsewhere.
+    let file = dir.path().join("planned/measurements.csv");
+    let done = replay(
+        exact_world(40.0, [0.0, 0.0], [-2.0, 0.0, 0.5], [0.0, 0.0, 0.2]),
+        &file,
+        None,
+        &dir.path().join("replayed"),
+    );
+    let placed = done.sim.world.tracker.pose;
+    let moved = (placed.translation.vector - known.translation.vector).norm();
+    let turned = (placed.rotation * known.rotation.inverse()).angle();
+    // Exact up to where Levenberg–Marquardt stops (nanometres), far below any tracker noise.
+    assert!(
+        moved < 1e-8 && turned < 1e-9,
+        "tracker off by {moved} m, {turned} rad"
+    );
+    let t = &done.scenario.tracker;
+    assert!((t.yaw_deg - yaw).abs() < 1e-8, "yaw {}", t.yaw_deg);
+    assert!((t.tilt_deg[0] - tilt[0]).abs() < 1e-8 && (t.tilt_deg[1] - tilt[1]).abs() < 1e-8);
+    let m = done.replay.unwrap().mounting_m;
+    let off = (0..3)
+        .map(|i| (m[i] - reflector[i]).abs())
+        .fold(0.0, f64::max);
+    assert!(off < 1e-8, "reflector {m:?}, was {reflector:?}");
+    // And so the replay measures what the original campaign measured.
+    let chain = &done.sim.world.nominal;
+    let a = Dataset::read(&file, &chain.joint_names()).unwrap();
+    let b = Dataset::read(
+        &dir.path().join("replayed/measurements.csv"),
+        &chain.joint_names(),
+    )
+    .unwrap();
+    assert_eq!(a.q, b.q);
+    let worst = a
+        .measured
+        .iter()
+        .zip(&b.measured)
+        .map(|(p, q)| (p[0] - q[0]).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-9,
+        "replayed measurements {worst} m from the originals"
+    );
+}
+
+#[test]
+fn every_row_is_measured_even_where_the_simulated_tracker_would_not_see_it() {
+    let dir = TempDir::new().unwrap();
+    let mut scenario = ur10_ipa();
+    // A 1° acceptance cone would refuse nearly every configuration of a planned campaign.
+    scenario.tracker.acceptance_half_angle_deg = 1.0;
+    let done = replay(
+        scenario,
+        &series_c(),
+        Some(root().join("mappings/ipa_ur10.toml")),
+        dir.path(),
+    );
+    assert_eq!(done.sim.campaign.points.len(), 2773);
+    let seen = done
+        .sim
+        .campaign
+        .points
+        .iter()
+        .filter(|p| {
+            let facing = p.true_flange.rotation * done.sim.world.mounting.facing;
+            done.sim
+                .world
+                .tracker
+                .in_acceptance_cone(&p.true_reflectors[0], &facing)
+        })
+        .count();
+    assert!(seen < 2773 / 10, "{seen} of 2773 inside the 1° cone");
+}
+
+#[test]
+fn a_row_outside_the_joint_limits_is_an_error_naming_it() {
+    let dir = TempDir::new().unwrap();
+    let file = dir.path().join("real.csv");
+    let joints = "shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,wrist_2_joint,wrist_3_joint";
+    let rows = [
+        "0.1,-1.5,1.2,-1.0,-1.5,0.0,0.5,3.0,0.9",
+        "0.2,-1.4,1.1,-1.1,-1.4,0.1,0.6,3.1,0.8",
+        "0.3,-1.3,7.0,-1.2,-1.3,0.2,0.7,3.2,0.7",
+        "0.4,-1.2,1.0,-1.3,-1.2,0.3,0.8,3.3,0.6",
+        "0.5,-1.1,0.9,-1.4,-1.1,0.4,0.9,3.4,0.5",
+    ];
+    std::fs::write(&file, format!("{joints},x1,y1,z1\n{}\n", rows.join("\n"))).unwrap();
+    let out = dir.path().join("out");
+    let err = campaign::run(
+        ur10_ipa(),
+        &Options {
+            out: Some(out.clone()),
+            replay: Some(ReplaySource {
+                file: file.clone(),
+                mapping: None,
+            }),
+            ..Options::default()
+        },
+    )
+    .err()
+    .expect("a joint beyond its limit is refused")
+    .to_string();
+    assert!(
+        err.contains("real.csv") && err.contains("row 4") && err.contains("elbow_joint"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is written");
+}
