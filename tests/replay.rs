@@ -239,3 +239,71 @@ fn a_row_outside_the_joint_limits_is_an_error_naming_it() {
     );
     assert!(!out.exists(), "nothing is written");
 }
+
+/// `real_data --simulate` on a slice of each series (every 8th row) in a world whose robot is its nominal model
+/// and whose tracker is exact: the replayed series keep the real rows, angles and temperature, carry a probe
+/// orientation like the real ones, and go through the same protocol — where the nominal model, half a
+/// millimetre off on the real arm, is exact on the simulated one.
+#[test]
+fn the_simulated_tables_stand_beside_the_real_ones() {
+    use calibench::app::real_data::{self, read_series};
+    use calibench::app::sim_vs_real::{compare, simulate_series};
+    use calibench::calib::method::FitContext;
+    use calibench::calib::registry::MethodKind;
+    use calibench::robot::dh::DhChain;
+
+    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
+    let dh = DhChain::from_chain(&chain).unwrap();
+    let ctx = FitContext::new(&chain, &dh);
+    let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
+    let real: Vec<Dataset> = read_series(&root().join("../shared/data/ipa-ur10"), &mapping, &chain)
+        .unwrap()
+        .iter()
+        .map(|d| d.subset(&(0..d.len()).step_by(8).collect::<Vec<_>>()))
+        .collect();
+    let mut exact = exact_world(0.0, [0.0, 0.0], [0.0, 3.0, 1.0], [0.0, 0.0, 0.1]);
+    exact.tracker.orientation_sigma_rad = 0.0;
+    let (sim, placements) = simulate_series(&exact, &real).unwrap();
+    assert_eq!(placements.len(), 3);
+    for (r, s) in real.iter().zip(&sim) {
+        assert_eq!(r.q, s.q);
+        assert_eq!(r.point_ids, s.point_ids);
+        assert_eq!(
+            r.extra_inputs, s.extra_inputs,
+            "the real temperature, passed through"
+        );
+        assert_eq!(
+            r.measured_orientation.as_ref().map(Vec::len),
+            s.measured_orientation.as_ref().map(Vec::len)
+        );
+        assert_ne!(r.measured, s.measured);
+    }
+    let methods = [MethodKind::Nominal, MethodKind::Kinematic];
+    let sizes = [40, 80];
+    let quiet = &mut |_: &str| {};
+    let real_t = real_data::tables(&methods, &ctx, &real, Some(&sizes), 1, quiet).unwrap();
+    let sim_t = real_data::tables(&methods, &ctx, &sim, Some(&sizes), 1, quiet).unwrap();
+    let lines = compare(&methods, &real_t, &sim_t, &sizes);
+    let protocols: Vec<&str> = lines.iter().map(|l| l.protocol.as_str()).collect();
+    for p in [
+        "C → D",
+        "C → B",
+        "B → C",
+        "within C",
+        "curve C, 40 points",
+        "curve C, 80 points",
+    ] {
+        assert_eq!(
+            protocols.iter().filter(|&&q| q == p).count(),
+            2,
+            "{p}: {protocols:?}"
+        );
+    }
+    let nominal = lines
+        .iter()
+        .find(|l| l.protocol == "within C" && l.method == "nominal")
+        .unwrap();
+    let (real_mean, sim_mean) = (nominal.real_mean_mm.unwrap(), nominal.sim_mean_mm.unwrap());
+    assert!(real_mean > 0.5, "real nominal {real_mean} mm");
+    assert!(sim_mean < 1e-3, "the exact robot's nominal {sim_mean} mm");
+}

@@ -65,7 +65,7 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
                 &source.file,
                 source.mapping.as_deref(),
             )?;
-            let replay = super::replay::replay(&mut scenario, &data)?;
+            let replay = super::replay::replay(&mut scenario, &data, 0)?;
             let frame = &replay.registration.frame;
             let report = ReplayReport {
                 file: source.file.clone(),

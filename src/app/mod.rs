@@ -8,6 +8,7 @@ pub mod calibrate;
 pub mod campaign;
 pub mod real_data;
 pub mod replay;
+pub mod sim_vs_real;
 
 use crate::campaign::{Generator, Simulation};
 use crate::design::DOptimal;

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::calib::method::FitContext;
+use crate::calib::registry::MethodKind;
 use crate::calib::regression::RegressionOptions;
 use crate::dataset::Dataset;
 use crate::dataset::mapping::ColumnMapping;
@@ -68,43 +69,18 @@ pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     let dh = DhChain::from_chain(&chain)?;
     let mapping = ColumnMapping::load(&options.mapping)?;
     let series = read_series(&options.data_dir, &mapping, &chain)?;
-    let [b, c, d] = [&series[0], &series[1], &series[2]];
     let ctx = FitContext::new(&chain, &dh);
     let rule = SplitRule::default();
-    let refit = |name, data| TestSet {
-        name,
-        data,
-        registration: TestRegistration::Refit,
-    };
     show(&ranges_md(&series, &chain));
     show(&repeats_md(&series));
-
-    // 1. Across campaigns.
-    let mut across = Vec::new();
-    for (train, tests) in [
-        (("C", c), vec![refit("D", d), refit("B", b)]),
-        (("B", b), vec![refit("C", c)]),
-    ] {
-        let table = protocol::across(&METHODS, &ctx, &rule, train, &tests)?;
-        show(&rows_md(&table));
-        show(&best_md(&table.rows));
-        across.push((table.title, table.rows));
-    }
-
-    // 2. Within series C.
-    let (within_c, parts) = protocol::within(&METHODS, &ctx, &rule, ("C", c))?;
-    show(&rows_md(&within_c));
-
-    // 3. The learning curve: subsets of C's training + validation pool, tested on the held-out 25 %.
-    let curve = match &options.sizes {
-        None => Vec::new(),
-        Some(sizes) => {
-            let curve = protocol::curve(&METHODS, &ctx, &rule, c, &parts, sizes, options.draws)?;
-            show(&curve_md(&curve, sizes, parts.test.len()));
-            curve
-        }
-    };
-
+    let tables = tables(
+        &METHODS,
+        &ctx,
+        &series,
+        options.sizes.as_deref(),
+        options.draws,
+        show,
+    )?;
     let protocol = serde_json::json!({
         "data": options.data_dir.display().to_string(),
         "mapping": options.mapping.display().to_string(),
@@ -117,14 +93,74 @@ pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     });
     let report = Report {
         protocol,
-        across,
-        within_c: within_c.rows,
-        curve,
+        across: tables
+            .across
+            .into_iter()
+            .map(|t| (t.title, t.rows))
+            .collect(),
+        within_c: tables.within_c.rows,
+        curve: tables.curve,
     };
     let json = serde_json::to_vec_pretty(&report)
         .map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))?;
     output::write_files(&options.out, &[("real_data.json", json)])?;
     Ok(options.out.join("real_data.json"))
+}
+
+/// The protocol's tables on the three series B, C, D (in the order of [`SERIES`]).
+pub struct Tables {
+    /// Fitted on C and tested on D and B; fitted on B and tested on C.
+    pub across: Vec<Table>,
+    pub within_c: Table,
+    /// Empty without sizes.
+    pub curve: Vec<CurvePoint>,
+    /// The held-out points of C the curve is tested on.
+    pub n_test: usize,
+}
+
+/// Runs the protocol of the module notes on `series` (B, C, D) with `methods`; hands each table to `show` as
+/// Markdown as soon as it is ready. The learning curve only with `sizes`.
+pub fn tables(
+    methods: &[MethodKind],
+    ctx: &FitContext,
+    series: &[Dataset],
+    sizes: Option<&[usize]>,
+    draws: usize,
+    show: &mut dyn FnMut(&str),
+) -> Result<Tables> {
+    let [b, c, d] = [&series[0], &series[1], &series[2]];
+    let rule = SplitRule::default();
+    let refit = |name, data| TestSet {
+        name,
+        data,
+        registration: TestRegistration::Refit,
+    };
+    let mut across = Vec::new();
+    for (train, tests) in [
+        (("C", c), vec![refit("D", d), refit("B", b)]),
+        (("B", b), vec![refit("C", c)]),
+    ] {
+        let table = protocol::across(methods, ctx, &rule, train, &tests)?;
+        show(&rows_md(&table));
+        show(&best_md(&table.rows));
+        across.push(table);
+    }
+    let (within_c, parts) = protocol::within(methods, ctx, &rule, ("C", c))?;
+    show(&rows_md(&within_c));
+    let curve = match sizes {
+        None => Vec::new(),
+        Some(sizes) => {
+            let curve = protocol::curve(methods, ctx, &rule, c, &parts, sizes, draws)?;
+            show(&curve_md(methods, &curve, sizes, parts.test.len()));
+            curve
+        }
+    };
+    Ok(Tables {
+        across,
+        within_c,
+        curve,
+        n_test: parts.test.len(),
+    })
 }
 
 /// The three series, in the order of [`SERIES`].
@@ -135,7 +171,7 @@ pub fn read_series(dir: &Path, mapping: &ColumnMapping, chain: &Chain) -> Result
         .collect()
 }
 
-fn name(r: &Row) -> String {
+pub(super) fn name(r: &Row) -> String {
     if r.inputs.is_empty() {
         format!("`{}`", r.method)
     } else {
@@ -286,7 +322,12 @@ fn ranges_md(series: &[Dataset], chain: &Chain) -> String {
     out
 }
 
-fn curve_md(curve: &[CurvePoint], sizes: &[usize], n_test: usize) -> String {
+fn curve_md(
+    methods: &[MethodKind],
+    curve: &[CurvePoint],
+    sizes: &[usize],
+    n_test: usize,
+) -> String {
     let mut out = format!(
         "\n#### Learning curve: mean position error (mm) on the {n_test} held-out points of series C, \
          mean over draws (min–max)\n\n| method |"
@@ -299,7 +340,7 @@ fn curve_md(curve: &[CurvePoint], sizes: &[usize], n_test: usize) -> String {
         out += "---|";
     }
     out += "\n";
-    for kind in METHODS {
+    for kind in methods {
         let _ = write!(out, "| `{}` |", kind.name());
         for &n in sizes {
             let of_cell = || {

@@ -30,6 +30,8 @@ pub const REGION: &str = "replay";
 
 /// A real campaign replayed in a scenario's world.
 pub struct Replay {
+    /// Which replay of the world this is.
+    pub index: u64,
     pub sim: Simulation,
     /// The registration of the real data on the nominal robot, which placed the tracker and the reflector.
     pub registration: Registration,
@@ -49,7 +51,8 @@ pub fn read(chain: &Chain, file: &Path, mapping: Option<&Path>) -> Result<Datase
 
 /// Registers `data` on the scenario's nominal robot, moves the scenario's tracker and reflector there (so the
 /// scenario written to `campaign.json` says where they stood), and measures `data`'s configurations in order.
-pub fn replay(scenario: &mut Scenario, data: &Dataset) -> Result<Replay> {
+/// `index` numbers the replay among several in the same world (independent noise).
+pub fn replay(scenario: &mut Scenario, data: &Dataset, index: u64) -> Result<Replay> {
     let chain = scenario.load_robot()?;
     check_replayable(&chain, &data.origin, &data.point_ids, &data.q)?;
     let dh = DhChain::from_chain(&chain)?;
@@ -84,8 +87,9 @@ pub fn replay(scenario: &mut Scenario, data: &Dataset) -> Result<Replay> {
         seed: world.seed(),
         selector: None,
     }
-    .replay(&data.origin, REGION, &data.point_ids, &data.q)?;
+    .replay(index, &data.origin, REGION, &data.point_ids, &data.q)?;
     Ok(Replay {
+        index,
         sim: Simulation { world, campaign },
         registration,
         placement_residual_rad,
@@ -125,8 +129,11 @@ fn probe_orientations(replay: &Replay, campaign: &Campaign) -> Result<Vec<UnitQu
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            // Its own stream: the positions' (0, REPLAY_ATTEMPT, k) stays as a campaign without a probe draws it.
-            let mut rng = world.rng(Stream::Measurement, &[1, REPLAY_ATTEMPT, k as u64]);
+            // Its own stream: the positions' stays as a campaign without a probe draws it.
+            let mut rng = world.rng(
+                Stream::Measurement,
+                &[replay.index, REPLAY_ATTEMPT + 1, k as u64],
+            );
             world
                 .tracker
                 .measure_orientation(&(p.true_flange.rotation * probe), &mut rng)

@@ -11,6 +11,10 @@
 //! 4. **The learning curve**: 25 … 1600 points drawn from the training and validation part of (2), five draws
 //!    each, each split 2/3 training, 1/3 validation, all tested on the same held-out 25 % of series C.
 //!
+//! `--simulate SCENARIO` replays the three series in the scenario's world (`campaign --replay`), runs the same
+//! protocol on the simulated series, and prints every table's held-out mean and max beside the real one
+//! (`DIR/sim_vs_real.json`, `DIR/sim_vs_real.csv`).
+//!
 //! `calibrate --robot robots/ur10.urdf --mapping mappings/ipa_ur10.toml --data …/Series_C/… --test-data
 //! …/Series_D/… --method M` reproduces any row of table 1 (`--ignore-inputs` for the rows without
 //! temperature).
@@ -21,6 +25,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use calibench::app::real_data::{self, Options};
+use calibench::app::sim_vs_real;
 
 #[derive(Parser, Debug)]
 #[command(about = "Every calibration method on the real UR10 tracker data: the README's tables")]
@@ -47,6 +52,9 @@ struct Cli {
     /// Skip the learning curve.
     #[arg(long)]
     no_curve: bool,
+    /// Replay the series in this scenario's world and print the simulated tables beside the real ones.
+    #[arg(long, value_name = "SCENARIO")]
+    simulate: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -59,7 +67,12 @@ fn main() -> ExitCode {
         draws: cli.draws,
         sizes: Some(cli.sizes).filter(|_| !cli.no_curve),
     };
-    match real_data::run(&options, &mut |text| print!("{text}")) {
+    let show = &mut |text: &str| print!("{text}");
+    let done = match &cli.simulate {
+        None => real_data::run(&options, show),
+        Some(scenario) => sim_vs_real::run(&options, scenario, show),
+    };
+    match done {
         Ok(written) => {
             println!("\nwrote {}", written.display());
             ExitCode::SUCCESS

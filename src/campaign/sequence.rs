@@ -14,7 +14,8 @@ use crate::robot::Chain;
 use crate::robot::kinematics::forward_kinematics;
 
 /// A replayed campaign draws its noise with this as the attempt index: above the planned campaigns' attempts
-/// and the ground-truth sets' (`GROUND_TRUTH_ATTEMPT + set`), so it never shares their streams.
+/// and the ground-truth sets' (`GROUND_TRUTH_ATTEMPT + set`), so it never shares their streams. A simulated
+/// 6-DoF probe's orientation noise draws with the next one.
 pub const REPLAY_ATTEMPT: u64 = 1 << 33;
 
 /// One stop of the arm's visit sequence.
@@ -26,7 +27,7 @@ pub struct Visit {
     pub q_cmd: Vec<f64>,
     /// The indices the visit's repeatability and tracker noise derive from, with the generator's seed:
     /// (region, attempt, candidate) for a planned point, so that a point draws the same whatever else the
-    /// campaign measures; (0, [`REPLAY_ATTEMPT`], row) for a replayed one.
+    /// campaign measures; (replay, [`REPLAY_ATTEMPT`], row) for a replayed one.
     pub stream: [u64; 3],
 }
 
@@ -123,9 +124,12 @@ impl Generator<'_> {
     /// inverse kinematics and no feasibility check — the real tracker measured these points, so they are
     /// measured even where the simulated acceptance cone, line of sight or an obstacle would refuse them. A
     /// command outside the robot's joint limits (or with the wrong number of angles) is an error naming its
-    /// row of `origin` as a spreadsheet numbers it (the header is row 1) and its point id `ids[k]`.
+    /// row of `origin` as a spreadsheet numbers it (the header is row 1) and its point id `ids[k]`. `replay`
+    /// numbers the replay, so that several replays in one world (the series of a data set) draw independent
+    /// noise.
     pub fn replay(
         &self,
+        replay: u64,
         origin: &str,
         region: &str,
         ids: &[String],
@@ -139,7 +143,7 @@ impl Generator<'_> {
             .map(|(k, q)| Visit {
                 region: region.to_string(),
                 q_cmd: q.clone(),
-                stream: [0, REPLAY_ATTEMPT, k as u64],
+                stream: [replay, REPLAY_ATTEMPT, k as u64],
             })
             .collect();
         let n = visits.len();
