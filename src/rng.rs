@@ -16,6 +16,8 @@ pub enum Stream {
     Split = 6,
     /// The study's campaigns: one seed per (region, layout, size, repetition), and its test sets.
     Study = 7,
+    /// The measurement of the `k`-th point of a campaign's sequence, when the history of the arm matters.
+    Sequence = 8,
 }
 
 /// A generator for `purpose` and up to three indices (region, attempt, point, …). The key holds the seed,

@@ -16,8 +16,10 @@ use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
 use crate::robot::ik::{IkError, IkOptions, IkSolver};
 use crate::robot::kinematics::{Frames, forward_kinematics};
+use crate::truth::history;
 use crate::truth::physics::SettleOptions;
-use crate::truth::{DeflectionSolver, TrueState};
+use crate::truth::robot::Deflection;
+use crate::truth::{DeflectionSolver, TrueState, Visit};
 use crate::world::World;
 
 /// The last millimetres of a beam lie inside the reflector's own mount, which must not count as blocking.
@@ -66,6 +68,8 @@ pub struct CampaignPoint {
     pub true_in_tracker: Vec<Point3<f64>>,
     /// Link-side joint angles of the true arm (deflected, with noise).
     pub q_true: Vec<f64>,
+    /// Temperature of the links when the point was measured (°C), when the true robot has a thermal profile.
+    pub temperature: Option<f64>,
 }
 
 /// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a
@@ -147,6 +151,11 @@ pub struct Campaign {
     pub rejections: BTreeMap<String, Rejections>,
 }
 
+/// Unloaded angles and link-length factor of a command, for the deflection solvers.
+type Unloaded = Option<(Vec<f64>, f64)>;
+/// The settled arm and its link-length factor.
+type Settled = Option<(Deflection, f64)>;
+
 /// A command the controller would send: the first half of a candidate's life.
 struct Planned {
     q_cmd: Vec<f64>,
@@ -161,7 +170,10 @@ struct Work {
 }
 
 impl Generator<'_> {
-    /// Generates the campaign over all regions; points are numbered from 0 in region order.
+    /// Generates the campaign over all regions; points are numbered from 0 in region order, which is the
+    /// order the arm visits them in. Feasibility is decided without the arm's history; when the true robot
+    /// has one (lost motion, a warm-up), the chosen points are then measured as the sequence they form
+    /// ([`Generator::measure_sequence`]).
     pub fn run(&self, regions: &[RegionConfig]) -> Result<Campaign> {
         let collision = CollisionModel::new(&self.world.nominal);
         let mut points = Vec::new();
@@ -173,6 +185,13 @@ impl Generator<'_> {
                 points.push(p.clone());
             }
             rejections.insert(region.name.clone(), counts);
+        }
+        if self.world.robot.has_history() {
+            let sequence: Vec<(String, Vec<f64>)> = points
+                .iter()
+                .map(|p| (p.region.clone(), p.q_cmd.clone()))
+                .collect();
+            points = self.measure_sequence(&sequence)?;
         }
         Ok(Campaign {
             joint_names: self.world.nominal.joint_names(),
@@ -283,7 +302,7 @@ impl Generator<'_> {
     ) -> Result<(Vec<CampaignPoint>, Rejections)> {
         let planned = self.plan_all(r, attempt, region, anchor, unit, collision);
 
-        let deflected = self.deflect_planned(&planned)?;
+        let deflected = self.deflect_planned(&planned, |_| Visit::default())?;
 
         let outcomes: Vec<std::result::Result<CampaignPoint, Reason>> = planned
             .into_par_iter()
@@ -291,10 +310,12 @@ impl Generator<'_> {
             .enumerate()
             .map_init(
                 || self.work(),
-                |work, (i, (plan, q_link))| {
+                |work, (i, (plan, settled))| {
                     let plan = plan?;
-                    let q_link = q_link.expect("a planned command always has a deflection");
-                    self.measure(r, attempt, i as u64, region, plan, &q_link, collision, work)
+                    let (settled, _) = settled.expect("a planned command always has a deflection");
+                    self.measure(
+                        r, attempt, i as u64, region, plan, &settled, collision, work,
+                    )
                 },
             )
             .collect();
@@ -337,7 +358,9 @@ impl Generator<'_> {
             ..region.clone()
         };
         let planned = self.plan_all(r, attempt, region, &anchor, unit, &collision);
-        let deflected = self.deflect_planned(&planned)?;
+        // Each evaluation pose is approached from the campaign's posture, at the end of the warm-up.
+        let robot = &self.world.robot;
+        let deflected = self.deflect_planned(&planned, |q| robot.evaluation_visit(q))?;
         let mut counts = Rejections {
             candidates: unit.len(),
             ..Rejections::default()
@@ -346,10 +369,10 @@ impl Generator<'_> {
         let mut state = TrueState::new(&self.world.robot);
         for (plan, q_link) in planned.into_iter().zip(deflected) {
             match (plan, q_link) {
-                (Ok(plan), Some(q_link)) => {
+                (Ok(plan), Some((settled, scale))) => {
                     self.world
                         .robot
-                        .reach_with_angles(&q_link, None, &mut state);
+                        .reach_with_angles(&settled, scale, None, &mut state);
                     let true_flange = state.frames.flange;
                     points.push(TruePoint {
                         region: region.name.clone(),
@@ -516,37 +539,48 @@ impl Generator<'_> {
         })
     }
 
-    /// The static deflection of every planned command: fixed point in parallel, or the rapier reference.
+    /// The static deflection of every planned command, each reached after the history `visit` gives it: fixed
+    /// point in parallel, or the rapier reference.
     fn deflect_planned(
         &self,
         planned: &[std::result::Result<Planned, Reason>],
-    ) -> Result<Vec<Option<Vec<f64>>>> {
-        let unloaded: Vec<Option<Vec<f64>>> = planned
+        visit: impl Fn(&[f64]) -> Visit + Sync,
+    ) -> Result<Vec<Settled>> {
+        let unloaded: Vec<Unloaded> = planned
             .par_iter()
             .map_init(
                 || TrueState::new(&self.world.robot),
                 |state, p| {
-                    p.as_ref().ok().map(|p| {
-                        self.world.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
-                        state.q0.clone()
-                    })
+                    p.as_ref()
+                        .ok()
+                        .map(|p| self.unloaded(&p.q_cmd, &visit(&p.q_cmd), state))
                 },
             )
             .collect();
         self.deflect_all(&unloaded)
     }
 
-    fn deflect_all(&self, unloaded: &[Option<Vec<f64>>]) -> Result<Vec<Option<Vec<f64>>>> {
+    fn unloaded(&self, q_cmd: &[f64], visit: &Visit, state: &mut TrueState) -> (Vec<f64>, f64) {
+        let robot = &self.world.robot;
+        robot.unloaded_angles_after(q_cmd, visit, &mut state.q0);
+        (state.q0.clone(), robot.length_scale(visit))
+    }
+
+    fn deflect_all(&self, unloaded: &[Unloaded]) -> Result<Vec<Settled>> {
         match self.world.deflection() {
             DeflectionSolver::FixedPoint => unloaded
                 .par_iter()
                 .map_init(
                     || TrueState::new(&self.world.robot),
-                    |state, q0| {
-                        q0.as_ref()
-                            .map(|q0| {
+                    |state, u| {
+                        u.as_ref()
+                            .map(|(q0, scale)| {
                                 state.q0.copy_from_slice(q0);
-                                self.world.robot.deflect(state).map(|_| state.q.clone())
+                                state.scale = *scale;
+                                self.world
+                                    .robot
+                                    .deflect(state)
+                                    .map(|_| (state.deflection(), *scale))
                             })
                             .transpose()
                     },
@@ -559,13 +593,130 @@ impl Generator<'_> {
                     .physics_reference(SettleOptions::default())?;
                 unloaded
                     .iter()
-                    .map(|q0| {
-                        q0.as_ref()
-                            .map(|q0| physics.settle(q0).map(|s| s.q))
+                    .map(|u| {
+                        u.as_ref()
+                            .map(|(q0, scale)| {
+                                physics.settle(q0).map(|s| {
+                                    let settled = Deflection {
+                                        q: s.q,
+                                        tilt: Vec::new(),
+                                    };
+                                    (settled, *scale)
+                                })
+                            })
                             .transpose()
                     })
                     .collect()
             }
+        }
+    }
+
+    /// Measures `points` (region name, commanded joint angles) in the order given, as the sequence the arm
+    /// visits from the campaign's posture: each point's history (the direction each joint came from, the
+    /// temperature at its place in the sequence; [`history::sequence`]), the deflection by the scenario's
+    /// solver, repeatability and tracker noise from the point's place `k` in the sequence. No feasibility
+    /// test: every point is measured (a replayed real campaign was measured). Point ids are the places.
+    pub fn measure_sequence(&self, points: &[(String, Vec<f64>)]) -> Result<Vec<CampaignPoint>> {
+        let robot = &self.world.robot;
+        let dof = self.world.nominal.dof();
+        if let Some(k) = points
+            .iter()
+            .position(|(_, q)| q.len() != dof || q.iter().any(|v| !v.is_finite()))
+        {
+            return Err(Error::Invalid(format!(
+                "point {k} of the sequence: the command must hold {dof} finite joint angles"
+            )));
+        }
+        let posture: Vec<f64> = self
+            .config
+            .posture_deg
+            .iter()
+            .map(|d| d.to_radians())
+            .collect();
+        let visits = history::sequence(
+            &robot.perturbation,
+            &posture,
+            points.iter().map(|(_, q)| q.as_slice()),
+        );
+        let unloaded: Vec<Unloaded> = points
+            .par_iter()
+            .zip(&visits)
+            .map_init(
+                || TrueState::new(robot),
+                |state, ((_, q), visit)| Some(self.unloaded(q, visit, state)),
+            )
+            .collect();
+        let settled = self.deflect_all(&unloaded)?;
+        Ok(points
+            .par_iter()
+            .zip(settled.into_par_iter())
+            .zip(&visits)
+            .enumerate()
+            .map_init(
+                || self.work(),
+                |work, (k, (((region, q), settled), visit))| {
+                    let (settled, scale) = settled.expect("every command has a deflection");
+                    let mut rng = derive(self.seed, Stream::Sequence, &[k as u64]);
+                    robot.reach_with_angles(&settled, scale, Some(&mut rng), &mut work.state);
+                    forward_kinematics(&self.world.nominal, q, &mut work.frames);
+                    let plan = Planned {
+                        q_cmd: q.clone(),
+                        nominal_flange: work.frames.flange,
+                    };
+                    let true_reflectors = self.true_reflectors(work);
+                    let mut point = self.record(region, plan, true_reflectors, &mut rng, work);
+                    point.id = k;
+                    point.temperature = visit.temperature;
+                    point
+                },
+            )
+            .collect())
+    }
+
+    fn true_reflectors(&self, work: &Work) -> Vec<Point3<f64>> {
+        let flange = work.state.frames.flange;
+        self.world
+            .mounting
+            .actual
+            .iter()
+            .map(|p| flange * p)
+            .collect()
+    }
+
+    /// The tracker's measurement of the reached arm in `work.state`, and what the simulation knows about it.
+    fn record(
+        &self,
+        region: &str,
+        plan: Planned,
+        true_reflectors: Vec<Point3<f64>>,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        work: &Work,
+    ) -> CampaignPoint {
+        let measured = true_reflectors
+            .iter()
+            .map(|p| self.world.tracker.measure(p, rng))
+            .collect();
+        CampaignPoint {
+            id: 0,
+            region: region.to_string(),
+            nominal_reflectors: self
+                .world
+                .mounting
+                .nominal
+                .iter()
+                .map(|p| plan.nominal_flange * p)
+                .collect(),
+            q_cmd: plan.q_cmd,
+            nominal_flange: plan.nominal_flange,
+            measured,
+            true_flange: work.state.frames.flange,
+            true_in_tracker: true_reflectors
+                .iter()
+                .map(|p| self.world.tracker.pose.inverse_transform_point(p))
+                .collect(),
+            true_reflectors,
+            q_true: work.state.q.clone(),
+            temperature: None,
         }
     }
 
@@ -577,24 +728,18 @@ impl Generator<'_> {
         i: u64,
         region: &RegionConfig,
         plan: Planned,
-        q_link: &[f64],
+        settled: &Deflection,
         collision: &CollisionModel,
         work: &mut Work,
     ) -> std::result::Result<CampaignPoint, Reason> {
         let mut rng = derive(self.seed, Stream::Measurement, &[r, attempt, i]);
         self.world
             .robot
-            .reach_with_angles(q_link, Some(&mut rng), &mut work.state);
+            .reach_with_angles(settled, 1.0, Some(&mut rng), &mut work.state);
         let true_flange = work.state.frames.flange;
         let origin = self.world.tracker.origin();
         let facing = true_flange.rotation * self.world.mounting.facing;
-        let true_reflectors: Vec<Point3<f64>> = self
-            .world
-            .mounting
-            .actual
-            .iter()
-            .map(|p| true_flange * p)
-            .collect();
+        let true_reflectors = self.true_reflectors(work);
         for p in &true_reflectors {
             if !self.world.tracker.in_acceptance_cone(p, &facing) {
                 return Err(Reason::AcceptanceCone);
@@ -603,30 +748,6 @@ impl Generator<'_> {
                 return Err(Reason::LineOfSight);
             }
         }
-        let measured = true_reflectors
-            .iter()
-            .map(|p| self.world.tracker.measure(p, &mut rng))
-            .collect();
-        Ok(CampaignPoint {
-            id: 0,
-            region: region.name.clone(),
-            nominal_reflectors: self
-                .world
-                .mounting
-                .nominal
-                .iter()
-                .map(|p| plan.nominal_flange * p)
-                .collect(),
-            q_cmd: plan.q_cmd,
-            nominal_flange: plan.nominal_flange,
-            measured,
-            true_flange,
-            true_in_tracker: true_reflectors
-                .iter()
-                .map(|p| self.world.tracker.pose.inverse_transform_point(p))
-                .collect(),
-            true_reflectors,
-            q_true: work.state.q.clone(),
-        })
+        Ok(self.record(&region.name, plan, true_reflectors, &mut rng, work))
     }
 }
