@@ -295,7 +295,10 @@ fn systematic_errors_move_the_measurement_by_their_size() {
     .unwrap();
     let shift = ranged.measure(&p, &mut rng) - truth;
     let along = 12e-6 + 1e-6 * range;
-    assert!((shift - beam * along).norm() < 1e-12, "{shift:?} vs {along} along the beam");
+    assert!(
+        (shift - beam * along).norm() < 1e-12,
+        "{shift:?} vs {along} along the beam"
+    );
     // An index offset of the elevation turns the point about the horizontal axis across the beam by its
     // angle: range · offset, perpendicular to the beam.
     let indexed = Tracker::new(TrackerConfig {
@@ -306,7 +309,11 @@ fn systematic_errors_move_the_measurement_by_their_size() {
     let shift = indexed.measure(&p, &mut rng) - truth;
     // Along the beam only to second order: range · δ² / 2, below 1e-10 m here.
     assert!(shift.dot(&beam).abs() < 1e-10);
-    assert!((shift.norm() - range * 5e-6).abs() < 1e-11, "{}", shift.norm());
+    assert!(
+        (shift.norm() - range * 5e-6).abs() < 1e-11,
+        "{}",
+        shift.norm()
+    );
     assert!(shift.z > 0.0, "a positive index offset raises the point");
     // The azimuth encoder's eccentricity is a first harmonic of the azimuth: e0 cos(az) + e1 sin(az), across
     // the beam in the horizontal plane by the horizontal distance times that angle.

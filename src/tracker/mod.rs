@@ -109,8 +109,14 @@ impl Tracker {
             ("range_scale", c.range_scale),
             ("azimuth_eccentricity_rad", c.azimuth_eccentricity_rad[0]),
             ("azimuth_eccentricity_rad", c.azimuth_eccentricity_rad[1]),
-            ("elevation_eccentricity_rad", c.elevation_eccentricity_rad[0]),
-            ("elevation_eccentricity_rad", c.elevation_eccentricity_rad[1]),
+            (
+                "elevation_eccentricity_rad",
+                c.elevation_eccentricity_rad[0],
+            ),
+            (
+                "elevation_eccentricity_rad",
+                c.elevation_eccentricity_rad[1],
+            ),
             ("vertical_index_offset_rad", c.vertical_index_offset_rad),
         ];
         for (name, v) in systematic {
