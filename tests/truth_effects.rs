@@ -383,3 +383,75 @@ fn true_inertials_and_cables_load_the_joints_more_than_the_urdf_says() {
     }
     assert!(p.link_mass_factor.iter().any(|f| (f - 1.0).abs() > 0.03));
 }
+
+#[test]
+fn rapier_follows_the_soft_zone_and_the_true_inertials_as_the_fixed_point_does() {
+    use calibench::truth::physics::SettleOptions;
+    use calibench::truth::robot::Deflection;
+    use rand::Rng;
+    let chain = iiwa();
+    let model = ErrorModel {
+        frame_translation_m: 1e-4,
+        frame_rotation_rad: 2e-4,
+        link_mass_spread: 0.1,
+        link_com_m: 0.01,
+        cable_kg_per_m: 0.5,
+        soft_zone_torque_nm: vec![
+            [29.0, 108.0],
+            [29.0, 108.0],
+            [14.0, 48.0],
+            [14.0, 48.0],
+            [4.0, 14.0],
+            [4.0, 14.0],
+            [4.0, 14.0],
+        ],
+        soft_zone_stiffness_ratio: [0.56, 0.92],
+        ..ErrorModel::stiff_only(vec![
+            22000.0, 14500.0, 11000.0, 11000.0, 4400.0, 3600.0, 2900.0,
+        ])
+    };
+    let payload = Payload {
+        mass: 0.4,
+        com: [0.0, 0.0, 0.03],
+    };
+    let robot = TrueRobot::new(&chain, perturbation(&model), payload).unwrap();
+    let mut physics = robot.physics_reference(SettleOptions::default()).unwrap();
+    let (mut fast, mut reference) = (TrueState::new(&robot), TrueState::new(&robot));
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let (mut worst, mut soft): (f64, f64) = (0.0, 0.0);
+    for _ in 0..16 {
+        let q: Vec<f64> = chain
+            .joints
+            .iter()
+            .map(|j| rng.random_range(0.8 * j.lower..0.8 * j.upper))
+            .collect();
+        robot.reach(&q, None, &mut fast).unwrap();
+        let settled = physics.settle(&fast.q0).unwrap();
+        robot.reach_with_angles(
+            &Deflection {
+                q: settled.q,
+                tilt: vec![],
+            },
+            1.0,
+            None,
+            &mut reference,
+        );
+        worst = worst.max(
+            (fast.frames.flange.translation.vector - reference.frames.flange.translation.vector)
+                .norm(),
+        );
+        // How much the soft zone itself moves the flange: against the linear springs (K3).
+        let mut linear = robot.clone();
+        linear.perturbation.soft_zone.clear();
+        let mut lin = TrueState::new(&linear);
+        linear.reach(&q, None, &mut lin).unwrap();
+        soft = soft.max(
+            (lin.frames.flange.translation.vector - fast.frames.flange.translation.vector).norm(),
+        );
+    }
+    assert!(
+        worst <= 1e-6,
+        "rapier and fixed point differ by {worst} m at the flange"
+    );
+    assert!(soft > 5e-5, "the soft zone moves the flange by {soft} m");
+}

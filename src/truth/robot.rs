@@ -406,13 +406,15 @@ impl TrueRobot {
             ));
         }
         let gravity_in_base = self.chain.base.rotation.inverse() * self.gravity;
-        super::physics::PhysicsReference::new(
+        let mut reference = super::physics::PhysicsReference::new(
             &self.urdf()?,
             &self.chain.joint_names(),
             &self.perturbation.stiffness,
             gravity_in_base.into(),
             opts,
-        )
+        )?;
+        reference.set_soft_zones(&self.perturbation.soft_zone)?;
+        Ok(reference)
     }
 
     /// URDF text of the true robot in its base frame (perturbed geometry, payload folded in).
