@@ -5,6 +5,7 @@
 pub mod distribution;
 pub mod generate;
 pub mod region;
+mod sequence;
 
 pub use distribution::{DistributionKind, PointDistribution};
 pub use generate::{Campaign, CampaignPoint, Generator, Rejections, Selector};
