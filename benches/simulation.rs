@@ -75,6 +75,83 @@ fn main() {
         iterations as f64 / commands.len() as f64
     );
 
+    // The same with every error source of issue 12 on (true inertials and cables, wave-generator harmonics,
+    // lost motion, soft zone, perpendicular tilt, thermal warm-up, tracker systematics), each pose reached
+    // after its place in the sequence.
+    let mut every = scenario.clone();
+    let t = &mut every.truth;
+    t.link_mass_spread = 0.1;
+    t.link_com_m = 0.01;
+    t.cable_kg_per_m = 0.5;
+    t.gear_ratio = vec![160; 7];
+    t.gear_wave_amplitude_rad = 5e-5;
+    t.hysteresis_rad = 1e-4;
+    t.soft_zone_torque_nm = vec![
+        [29.0, 108.0],
+        [29.0, 108.0],
+        [14.0, 48.0],
+        [14.0, 48.0],
+        [4.0, 14.0],
+        [4.0, 14.0],
+        [4.0, 14.0],
+    ];
+    t.soft_zone_stiffness_ratio = [0.56, 0.92];
+    t.tilt_stiffness_nm_per_rad = vec![4e5, 4e5, 2e5, 2e5, 1e5, 1e5, 1e5];
+    t.thermal = Some(calibench::truth::ThermalProfile {
+        start_c: 20.0,
+        end_c: 24.0,
+        time_constant_s: 1800.0,
+        seconds_per_point: 6.0,
+        expansion_per_k: 23e-6,
+        reference_c: 20.0,
+    });
+    every.tracker.range_offset_m = 5e-6;
+    every.tracker.range_scale = 1e-6;
+    every.tracker.azimuth_eccentricity_rad = [3e-6, -2e-6];
+    every.tracker.elevation_eccentricity_rad = [1e-6, 2e-6];
+    every.tracker.vertical_index_offset_rad = 2e-6;
+    let world = calibench::app::world(&every).expect("every effect on builds a world");
+    let visits = calibench::truth::history::sequence(
+        &world.robot.perturbation,
+        world.robot.approach(),
+        commands.iter().map(Vec::as_slice),
+    );
+    let mut state = TrueState::new(&world.robot);
+    let mut runs = Vec::new();
+    for _ in 0..7 {
+        let t = Instant::now();
+        for (q, visit) in commands.iter().zip(&visits) {
+            world
+                .robot
+                .reach_after(q, visit, Some(&mut rng), &mut state)
+                .expect("deflection converges");
+            let reflector = state.frames.flange * world.mounting.actual[0];
+            let m = world.tracker.measure(&reflector, &mut rng);
+            sink.x += m.x;
+        }
+        runs.push(t.elapsed());
+    }
+    let per_pose = median(runs).as_secs_f64() / commands.len() as f64;
+    let iterations: usize = commands
+        .iter()
+        .zip(&visits)
+        .map(|(q, visit)| {
+            world.robot.unloaded_angles_after(q, visit, &mut state.q0);
+            state.scale = world.robot.length_scale(visit);
+            world
+                .robot
+                .deflect(&mut state)
+                .expect("deflection converges")
+        })
+        .sum();
+    println!(
+        "fast true-robot path with every error source on, one core: {:.0} poses/s ({:.2} µs per pose, \
+         {:.1} fixed-point iterations on average)",
+        1.0 / per_pose,
+        per_pose * 1e6,
+        iterations as f64 / commands.len() as f64
+    );
+
     // The physics reference.
     let mut physics = robot
         .physics_reference(SettleOptions::default())

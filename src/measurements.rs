@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::campaign::Campaign;
-use crate::dataset::{Dataset, FLANGE_COLUMNS};
+use crate::dataset::{Dataset, FLANGE_COLUMNS, TEMPERATURE_COLUMN};
 use crate::error::{Error, Result};
 
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
@@ -48,7 +48,9 @@ fn reflector_count(campaign: &Campaign) -> usize {
     campaign.points.first().map_or(1, |p| p.measured.len())
 }
 
-/// `point_id, region, <joint names>, flange_x…z, flange_qw…qz, nom_x1…, x1…` (tracker frame).
+/// `point_id, region, <joint names>, flange_x…z, flange_qw…qz, nom_x1…, x1…` (tracker frame), and
+/// `temperature` (°C) when the true robot has a thermal profile. The rows are in the order the arm visited the
+/// points (`point_id` is the place in that sequence).
 pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     let k = reflector_count(campaign);
     let mut header: Vec<String> = vec!["point_id".into(), "region".into()];
@@ -56,12 +58,19 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     header.extend(FLANGE_COLUMNS.map(String::from));
     header.extend(xyz_columns("nom_", k));
     header.extend(xyz_columns("", k));
-    let rows = campaign.points.iter().map(|p| {
+    let temperature = campaign.points.iter().any(|p| p.temperature.is_some());
+    if temperature {
+        header.push(TEMPERATURE_COLUMN.into());
+    }
+    let rows = campaign.points.iter().map(move |p| {
         let mut row = vec![p.id.to_string(), p.region.clone()];
         row.extend(p.q_cmd.iter().map(|q| q.to_string()));
         row.extend(pose_cells(&p.nominal_flange));
         row.extend(point_cells(&p.nominal_reflectors));
         row.extend(point_cells(&p.measured));
+        if temperature {
+            row.push(p.temperature.map_or(String::new(), |t| t.to_string()));
+        }
         row
     });
     csv_bytes(header, rows)

@@ -444,3 +444,119 @@ fn measured_points_are_the_true_ones_seen_through_the_tracker() {
         );
     }
 }
+
+/// Every error source of the true robot and the tracker switched on, at the sizes `scenarios/README.md` cites.
+const EVERY_EFFECT: &str = r#"deflection = "fixed-point"
+link_mass_spread = 0.1
+link_com_m = 0.01
+cable_kg_per_m = 0.5
+gear_ratio = [160, 160, 160, 160, 160, 160, 160]
+gear_wave_amplitude_rad = 5e-5
+hysteresis_rad = 1e-4
+soft_zone_torque_nm = [[29, 108], [29, 108], [14, 48], [14, 48], [4, 14], [4, 14], [4, 14]]
+soft_zone_stiffness_ratio = [0.56, 0.92]
+tilt_stiffness_nm_per_rad = [4e5, 4e5, 2e5, 2e5, 1e5, 1e5, 1e5]
+thermal = { start_c = 20.0, end_c = 24.0, time_constant_s = 1800.0, seconds_per_point = 6.0, expansion_per_k = 23e-6, reference_c = 20.0 }"#;
+
+fn every_effect(points: usize) -> String {
+    let text = edit(
+        &small_paper(points),
+        "deflection = \"fixed-point\"",
+        EVERY_EFFECT,
+    );
+    edit(
+        &text,
+        "acceptance_half_angle_deg = 30.0",
+        "acceptance_half_angle_deg = 30.0\nrange_offset_m = 5e-6\nrange_scale = 1e-6\n\
+         azimuth_eccentricity_rad = [3e-6, -2e-6]\nelevation_eccentricity_rad = [1e-6, 2e-6]\n\
+         vertical_index_offset_rad = 2e-6",
+    )
+}
+
+#[test]
+fn every_effect_on_is_deterministic_across_threads_and_writes_the_temperature_in_visit_order() {
+    let dir = TempDir::new().unwrap();
+    let text = every_effect(POINTS);
+    let one = run_ok(&dir, "one", &text, Some("1"));
+    let two = run_ok(&dir, "two", &text, Some("2"));
+    for file in ["measurements.csv", "truth.csv", "campaign.json"] {
+        let a = read(&one.join(file));
+        assert!(
+            a == read(&two.join(file)),
+            "{file} differs between --threads 1 and --threads 2"
+        );
+    }
+    // The warm-up: the temperature of each row is the profile's at its place in the sequence.
+    let temperature = column(&one.join("measurements.csv"), "temperature");
+    let ids = column(&one.join("measurements.csv"), "point_id");
+    assert_eq!(temperature.len(), POINTS);
+    for (t, k) in temperature.iter().zip(&ids) {
+        let want = 24.0 - 4.0 * (-k * 6.0 / 1800.0).exp();
+        assert!(
+            (t - want).abs() < 1e-12,
+            "row {k}: {t} °C, the profile says {want}"
+        );
+    }
+    // Read back, the temperature is a candidate input of the methods that take inputs.
+    let joints: Vec<String> = (1..=7).map(|i| format!("iiwa_joint_{i}")).collect();
+    let data = calibench::dataset::Dataset::read(&one.join("measurements.csv"), &joints).unwrap();
+    assert_eq!(data.extra_input_names(), ["temperature"]);
+    assert_eq!(data.extra_inputs_of(3), [temperature[3]]);
+    // The new magnitudes are recorded with the scenario; an untouched scenario does not mention them.
+    let json = String::from_utf8(read(&one.join("campaign.json"))).unwrap();
+    assert!(json.contains("tilt_stiffness_nm_per_rad") && json.contains("range_offset_m"));
+    let plain = run_ok(&dir, "plain", &small_paper(POINTS), Some("2"));
+    let json = String::from_utf8(read(&plain.join("campaign.json"))).unwrap();
+    assert!(!json.contains("hysteresis") && !json.contains("range_offset_m"));
+    assert!(!headers(&plain.join("measurements.csv")).contains(&"temperature".to_string()));
+}
+
+#[test]
+fn a_sequence_is_measured_in_its_order_with_lost_motion() {
+    let mut scenario =
+        calibench::scenario::Scenario::parse(&every_effect(POINTS), "every effect").unwrap();
+    scenario.truth.repeatability_rad = 0.0;
+    scenario.truth.thermal = None;
+    let world = calibench::app::world(&scenario).unwrap();
+    let generator = calibench::campaign::Generator {
+        world: &world,
+        config: &scenario.campaign,
+        seed: 1,
+        selector: None,
+    };
+    let at: Vec<f64> = scenario
+        .campaign
+        .posture_deg
+        .iter()
+        .map(|d| d.to_radians() + 0.05)
+        .collect();
+    let shifted = |d: f64| at.iter().map(|q| q + d).collect::<Vec<f64>>();
+    let sequence: Vec<calibench::campaign::Stop> = [
+        shifted(-0.1),
+        at.clone(),
+        shifted(0.1),
+        at.clone(),
+        shifted(-0.2),
+        at.clone(),
+    ]
+    .into_iter()
+    .enumerate()
+    .map(|(k, q_cmd)| calibench::campaign::Stop {
+        region: "r".to_string(),
+        q_cmd,
+        stream: [0, 0, k as u64],
+    })
+    .collect();
+    let points = generator.measure_sequence(&sequence).unwrap();
+    assert_eq!(
+        points.iter().map(|p| p.id).collect::<Vec<_>>(),
+        [0, 1, 2, 3, 4, 5]
+    );
+    assert_eq!(
+        points[1].true_flange, points[5].true_flange,
+        "the same approach: the same pose"
+    );
+    let gap = (points[1].true_flange.translation.vector - points[3].true_flange.translation.vector)
+        .norm();
+    assert!(gap > 2e-5, "opposite approaches differ: {gap} m");
+}

@@ -1,6 +1,6 @@
 //! The nominal robot: URDF loading and its errors, Jacobians and gravity against finite differences.
 
-use calibench::robot::dynamics::{GRAVITY, gravity_torques, potential_energy};
+use calibench::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques, potential_energy};
 use calibench::robot::kinematics::{flange_pose, forward_kinematics, point_jacobian};
 use calibench::robot::{Chain, Frames, Payload, urdf};
 use nalgebra::{Point3, Vector3};
@@ -207,4 +207,61 @@ fn bad_urdfs_are_refused_with_a_clear_message() {
         e.starts_with("URDF garbled: not a valid URDF") && !e.contains('\n'),
         "{e}"
     );
+}
+
+#[test]
+fn the_full_gravity_moment_is_minus_the_gradient_of_tilting_the_subtree() {
+    // The moment about any axis w through joint i's anchor is −dV/dε for turning everything beyond joint i
+    // by ε about w: an energy difference, independent of the cross product the pass uses.
+    let chain = iiwa();
+    let payload = Payload {
+        mass: 1.5,
+        com: [0.01, 0.02, 0.06],
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let mut frames = Frames::new(&chain);
+    let (mut tau, mut moments) = (vec![0.0; 7], vec![Vector3::zeros(); 7]);
+    let mut largest_perpendicular: f64 = 0.0;
+    for _ in 0..20 {
+        let q = random_q(&chain, &mut rng);
+        forward_kinematics(&chain, &q, &mut frames);
+        gravity_moments(&chain, &frames, &payload, &GRAVITY, &mut tau, &mut moments);
+        let mut axial = vec![0.0; 7];
+        gravity_torques(&chain, &frames, &payload, &GRAVITY, &mut axial);
+        for i in 0..7 {
+            assert_eq!(tau[i], axial[i], "the axial torques are the same pass");
+            let axis = frames.axis(&chain, i);
+            assert!((moments[i].dot(&axis) - tau[i]).abs() < 1e-9);
+            let anchor = frames.anchor(i);
+            let masses: Vec<(f64, Point3<f64>)> = (i + 1..chain.bodies.len())
+                .map(|b| {
+                    (
+                        chain.bodies[b].inertial.mass,
+                        frames.body[b] * chain.bodies[b].inertial.com,
+                    )
+                })
+                .chain([(payload.mass, frames.flange * Point3::from(payload.com))])
+                .collect();
+            for w in [Vector3::x(), Vector3::y(), Vector3::z()] {
+                let energy = |e: f64| -> f64 {
+                    let turn = nalgebra::Rotation3::from_scaled_axis(w * e);
+                    masses
+                        .iter()
+                        .map(|(m, c)| -m * GRAVITY.dot(&(anchor.coords + turn * (c - anchor))))
+                        .sum()
+                };
+                let h = 1e-6;
+                let grad = (energy(h) - energy(-h)) / (2.0 * h);
+                assert!(
+                    (moments[i].dot(&w) + grad).abs() < 1e-6,
+                    "joint {i}, axis {w:?}: M·w {} vs −dV/dε {}",
+                    moments[i].dot(&w),
+                    -grad
+                );
+            }
+            largest_perpendicular = largest_perpendicular.max((moments[i] - axis * tau[i]).norm());
+        }
+    }
+    // The perpendicular part is what the axial torque leaves out, and it is large.
+    assert!(largest_perpendicular > 50.0, "{largest_perpendicular} Nm");
 }

@@ -22,6 +22,7 @@ mod study;
 mod study_cli;
 mod tracker;
 mod truth;
+mod truth_effects;
 mod ur10;
 
 /// Cargo no longer discovers test files (`autotests = false`), so a file not declared here would silently

@@ -31,6 +31,11 @@ fn config(position_m: [f64; 3], yaw_deg: f64) -> TrackerConfig {
         angle_sigma_rad: 0.0,
         acceptance_half_angle_deg: 30.0,
         orientation_sigma_rad: 0.0,
+        range_offset_m: 0.0,
+        range_scale: 0.0,
+        azimuth_eccentricity_rad: [0.0; 2],
+        elevation_eccentricity_rad: [0.0; 2],
+        vertical_index_offset_rad: 0.0,
     }
 }
 
@@ -271,4 +276,57 @@ fn table_is_hit_only_when_the_arm_points_into_it() {
         ..table
     };
     assert_eq!(model.hits_obstacle(&frames_at(&chain, down), &high), None);
+}
+
+#[test]
+fn systematic_errors_move_the_measurement_by_their_size() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let base = config([2.0, -1.5, 0.5], 20.0);
+    let exact = Tracker::new(base.clone()).unwrap();
+    let p = Point3::new(0.6, 0.2, 0.8);
+    let truth = exact.measure(&p, &mut rng);
+    let range = truth.coords.norm();
+    let beam = truth.coords / range;
+    // A range offset and a scale error shift the point along the beam by exactly offset + scale · range.
+    let ranged = Tracker::new(TrackerConfig {
+        range_offset_m: 12e-6,
+        range_scale: 1e-6,
+        ..base.clone()
+    })
+    .unwrap();
+    let shift = ranged.measure(&p, &mut rng) - truth;
+    let along = 12e-6 + 1e-6 * range;
+    assert!(
+        (shift - beam * along).norm() < 1e-12,
+        "{shift:?} vs {along} along the beam"
+    );
+    // An index offset of the elevation turns the point about the horizontal axis across the beam by its
+    // angle: range · offset, perpendicular to the beam.
+    let indexed = Tracker::new(TrackerConfig {
+        vertical_index_offset_rad: 5e-6,
+        ..base.clone()
+    })
+    .unwrap();
+    let shift = indexed.measure(&p, &mut rng) - truth;
+    // Along the beam only to second order: range · δ² / 2, below 1e-10 m here.
+    assert!(shift.dot(&beam).abs() < 1e-10);
+    assert!(
+        (shift.norm() - range * 5e-6).abs() < 1e-11,
+        "{}",
+        shift.norm()
+    );
+    assert!(shift.z > 0.0, "a positive index offset raises the point");
+    // The azimuth encoder's eccentricity is a first harmonic of the azimuth: e0 cos(az) + e1 sin(az), across
+    // the beam in the horizontal plane by the horizontal distance times that angle.
+    let eccentric = Tracker::new(TrackerConfig {
+        azimuth_eccentricity_rad: [4e-6, -3e-6],
+        ..base
+    })
+    .unwrap();
+    let shift = eccentric.measure(&p, &mut rng) - truth;
+    let az = truth.y.atan2(truth.x);
+    let angle = 4e-6 * az.cos() - 3e-6 * az.sin();
+    let horizontal = truth.x.hypot(truth.y);
+    assert!(shift.z.abs() < 1e-12);
+    assert!((shift.norm() - horizontal * angle.abs()).abs() < 1e-11);
 }

@@ -2,6 +2,7 @@
 
 use calibench::robot::{Chain, Payload, urdf};
 use calibench::truth::physics::SettleOptions;
+use calibench::truth::robot::Deflection;
 use calibench::truth::{ErrorModel, Perturbation, TrueRobot, TrueState};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -22,7 +23,7 @@ fn model() -> ErrorModel {
         gear_orders: vec![1, 2],
         gear_amplitude_rad: 2e-5,
         repeatability_rad: 1e-5,
-        deflection: Default::default(),
+        ..ErrorModel::stiff_only(vec![])
     }
 }
 
@@ -102,7 +103,11 @@ fn rapier_and_fixed_point_agree_at_the_flange() {
         let q = random_q(&chain, &mut rng);
         robot.reach(&q, None, &mut fast).unwrap();
         let settled = physics.settle(&fast.q0).unwrap();
-        robot.reach_with_angles(&settled.q, None, &mut reference);
+        let settled = Deflection {
+            q: settled.q,
+            tilt: Vec::new(),
+        };
+        robot.reach_with_angles(&settled, 1.0, None, &mut reference);
         let gap = (fast.frames.flange.translation.vector
             - reference.frames.flange.translation.vector)
             .norm();

@@ -20,8 +20,17 @@ use crate::study::{StudyConfig, StudyResult};
 use crate::world::World;
 
 /// The scenario's world: its robot loaded and checked, the true robot, tracker and mounting drawn from its seed.
+/// Evaluation poses are approached from the campaign's posture.
 pub fn world(scenario: &Scenario) -> Result<World> {
-    World::new(scenario.load_robot()?, scenario.world_config())
+    let mut world = World::new(scenario.load_robot()?, scenario.world_config())?;
+    let posture: Vec<f64> = scenario
+        .campaign
+        .posture_deg
+        .iter()
+        .map(|d| d.to_radians())
+        .collect();
+    world.robot.set_approach(&posture);
+    Ok(world)
 }
 
 /// The scenario's world and its campaign over every region.

@@ -97,7 +97,9 @@ pub fn replay(scenario: &mut Scenario, data: &Dataset, index: u64) -> Result<Rep
 }
 
 /// The replayed campaign as the same kind of [`Dataset`] as the real `data` it replays: the same rows, ids,
-/// columns and extra inputs (the real temperature is passed through: the simulation has none of its own), the
+/// columns and extra inputs (the temperature is the simulated one when the true robot has a warm-up profile,
+/// put in place of the real file's `temperature` input; otherwise
+/// the real one is passed through), the
 /// tracker measurements from the simulation, and, when `data` measured a 6-DoF probe's orientation, the
 /// simulated probe's (the registered probe rotation on the true flange, with the tracker's orientation noise).
 pub fn as_dataset(replay: &Replay, data: &Dataset) -> Result<Dataset> {
@@ -113,6 +115,24 @@ pub fn as_dataset(replay: &Replay, data: &Dataset) -> Result<Dataset> {
     let mut sim = data.clone();
     sim.origin = format!("{} (replayed in '{}')", data.origin, world.config.name);
     sim.measured = campaign.points.iter().map(|p| p.measured.clone()).collect();
+    let simulated: Option<Vec<f64>> = campaign.points.iter().map(|p| p.temperature).collect();
+    if let Some(temperature) = simulated {
+        let name = crate::dataset::TEMPERATURE_COLUMN;
+        let x = sim
+            .extra_inputs
+            .get_or_insert_with(|| crate::dataset::ExtraInputs {
+                names: Vec::new(),
+                values: vec![Vec::new(); temperature.len()],
+            });
+        let column = x.names.iter().position(|n| n == name).unwrap_or_else(|| {
+            x.names.push(name.to_string());
+            x.values.iter_mut().for_each(|row| row.push(0.0));
+            x.names.len() - 1
+        });
+        for (row, t) in x.values.iter_mut().zip(temperature) {
+            row[column] = t;
+        }
+    }
     if data.measured_orientation.is_some() {
         sim.measured_orientation = Some(probe_orientations(replay, campaign)?);
     }

@@ -5,7 +5,7 @@
 //! Each series is replayed in the same world (one true robot), with its own tracker placement and probe
 //! position from registering that series, and its own noise streams. The replayed series enter the protocol as
 //! [`Dataset`]s of the same form as the real ones: the same rows, ids, joint angles, a simulated probe
-//! orientation, and the real temperature passed through (the simulation has no temperature of its own yet).
+//! orientation, and the temperature simulated when the truth has a warm-up profile, else the real one passed through.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -239,7 +239,7 @@ pub fn run(options: &Options, scenario: &Path, show: &mut dyn FnMut(&str)) -> Re
     let json = serde_json::to_vec_pretty(&serde_json::json!({
         "scenario": scenario,
         "placements": placements,
-        "temperature": "the real series' temperature column, passed through to the replays",
+        "temperature": "simulated by the truth's warm-up profile when it has one, else the real series' column passed through",
         "lines": lines,
     }))
     .map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))?;

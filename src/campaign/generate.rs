@@ -11,14 +11,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::region::{CampaignConfig, RegionConfig};
-use super::sequence::Visit;
+use super::sequence::Stop;
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
 use crate::robot::ik::{IkError, IkOptions, IkSolver};
 use crate::robot::kinematics::{Frames, forward_kinematics};
 use crate::truth::physics::SettleOptions;
-use crate::truth::{DeflectionSolver, TrueState};
+use crate::truth::robot::Deflection;
+use crate::truth::{DeflectionSolver, TrueState, Visit};
 use crate::world::World;
 
 /// The last millimetres of a beam lie inside the reflector's own mount, which must not count as blocking.
@@ -67,6 +68,8 @@ pub struct CampaignPoint {
     pub true_in_tracker: Vec<Point3<f64>>,
     /// Link-side joint angles of the true arm (deflected, with noise).
     pub q_true: Vec<f64>,
+    /// Temperature of the links when the point was measured (°C), when the true robot has a thermal profile.
+    pub temperature: Option<f64>,
 }
 
 /// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a
@@ -148,10 +151,15 @@ pub struct Campaign {
     pub rejections: BTreeMap<String, Rejections>,
 }
 
+/// Unloaded angles and link-length factor of a command, for the deflection solvers.
+pub(super) type Unloaded = Option<(Vec<f64>, f64)>;
+/// The settled arm and its link-length factor.
+pub(super) type Settled = Option<(Deflection, f64)>;
+
 /// A command the controller would send: the first half of a candidate's life.
-struct Planned {
-    q_cmd: Vec<f64>,
-    nominal_flange: Isometry3<f64>,
+pub(super) struct Planned {
+    pub(super) q_cmd: Vec<f64>,
+    pub(super) nominal_flange: Isometry3<f64>,
 }
 
 /// Per-thread workspaces.
@@ -187,7 +195,7 @@ impl Generator<'_> {
         r: u64,
         region: &RegionConfig,
         collision: &CollisionModel,
-    ) -> Result<(Vec<Visit>, Rejections)> {
+    ) -> Result<(Vec<Stop>, Rejections)> {
         let anchor = self.anchor(region)?;
         let want = region.points;
         let selects = region.distribution.selects();
@@ -252,7 +260,7 @@ impl Generator<'_> {
     }
 
     /// The `want` feasible points of `pool` that a model-based layout chooses, in pool order.
-    fn select(&self, region: &RegionConfig, pool: Vec<Visit>, want: usize) -> Result<Vec<Visit>> {
+    fn select(&self, region: &RegionConfig, pool: Vec<Stop>, want: usize) -> Result<Vec<Stop>> {
         let selector = self.selector.ok_or_else(|| {
             Error::Invalid(format!(
                 "region '{}': layout '{}' chooses its points for a model, and no model was given",
@@ -264,7 +272,7 @@ impl Generator<'_> {
         let chosen = selector
             .choose(&commands, want)
             .map_err(|e| Error::Unreachable(format!("region '{}': {}", region.name, e.detail())))?;
-        let mut pool: Vec<Option<Visit>> = pool.into_iter().map(Some).collect();
+        let mut pool: Vec<Option<Stop>> = pool.into_iter().map(Some).collect();
         Ok(chosen.into_iter().filter_map(|i| pool[i].take()).collect())
     }
 
@@ -277,23 +285,24 @@ impl Generator<'_> {
         anchor: &[f64],
         unit: &[[f64; 3]],
         collision: &CollisionModel,
-    ) -> Result<(Vec<Visit>, Rejections)> {
+    ) -> Result<(Vec<Stop>, Rejections)> {
         let planned = self.plan_all(r, attempt, region, anchor, unit, collision);
 
-        let deflected = self.deflect_planned(&planned)?;
+        let deflected = self.deflect_planned(&planned, |_| Visit::default())?;
 
-        let outcomes: Vec<std::result::Result<Visit, Reason>> = planned
+        let outcomes: Vec<std::result::Result<Stop, Reason>> = planned
             .into_par_iter()
             .zip(deflected.into_par_iter())
             .enumerate()
             .map_init(
                 || self.work(),
-                |work, (i, (plan, q_link))| {
+                |work, (i, (plan, settled))| {
                     let plan = plan?;
-                    let q_link = q_link.expect("a planned command always has a deflection");
+                    let (settled, scale) =
+                        settled.expect("a planned command always has a deflection");
                     let stream = [r, attempt, i as u64];
-                    self.visible(stream, &q_link, collision, work)?;
-                    Ok(Visit {
+                    self.visible(stream, &settled, scale, collision, work)?;
+                    Ok(Stop {
                         region: region.name.clone(),
                         q_cmd: plan.q_cmd,
                         stream,
@@ -340,7 +349,9 @@ impl Generator<'_> {
             ..region.clone()
         };
         let planned = self.plan_all(r, attempt, region, &anchor, unit, &collision);
-        let deflected = self.deflect_planned(&planned)?;
+        // Each evaluation pose is approached from the campaign's posture, at the end of the warm-up.
+        let robot = &self.world.robot;
+        let deflected = self.deflect_planned(&planned, |q| robot.evaluation_visit(q))?;
         let mut counts = Rejections {
             candidates: unit.len(),
             ..Rejections::default()
@@ -349,10 +360,10 @@ impl Generator<'_> {
         let mut state = TrueState::new(&self.world.robot);
         for (plan, q_link) in planned.into_iter().zip(deflected) {
             match (plan, q_link) {
-                (Ok(plan), Some(q_link)) => {
+                (Ok(plan), Some((settled, scale))) => {
                     self.world
                         .robot
-                        .reach_with_angles(&q_link, None, &mut state);
+                        .reach_with_angles(&settled, scale, None, &mut state);
                     let true_flange = state.frames.flange;
                     points.push(TruePoint {
                         region: region.name.clone(),
@@ -519,40 +530,53 @@ impl Generator<'_> {
         })
     }
 
-    /// The static deflection of every planned command: fixed point in parallel, or the rapier reference.
+    /// The static deflection of every planned command, each reached after the history `visit` gives it: fixed
+    /// point in parallel, or the rapier reference.
     fn deflect_planned(
         &self,
         planned: &[std::result::Result<Planned, Reason>],
-    ) -> Result<Vec<Option<Vec<f64>>>> {
-        let unloaded: Vec<Option<Vec<f64>>> = planned
+        visit: impl Fn(&[f64]) -> Visit + Sync,
+    ) -> Result<Vec<Settled>> {
+        let unloaded: Vec<Unloaded> = planned
             .par_iter()
             .map_init(
                 || TrueState::new(&self.world.robot),
                 |state, p| {
-                    p.as_ref().ok().map(|p| {
-                        self.world.robot.unloaded_angles(&p.q_cmd, &mut state.q0);
-                        state.q0.clone()
-                    })
+                    p.as_ref()
+                        .ok()
+                        .map(|p| self.unloaded(&p.q_cmd, &visit(&p.q_cmd), state))
                 },
             )
             .collect();
         self.deflect_all(&unloaded)
     }
 
-    pub(super) fn deflect_all(
+    pub(super) fn unloaded(
         &self,
-        unloaded: &[Option<Vec<f64>>],
-    ) -> Result<Vec<Option<Vec<f64>>>> {
+        q_cmd: &[f64],
+        visit: &Visit,
+        state: &mut TrueState,
+    ) -> (Vec<f64>, f64) {
+        let robot = &self.world.robot;
+        robot.unloaded_angles_after(q_cmd, visit, &mut state.q0);
+        (state.q0.clone(), robot.length_scale(visit))
+    }
+
+    pub(super) fn deflect_all(&self, unloaded: &[Unloaded]) -> Result<Vec<Settled>> {
         match self.world.deflection() {
             DeflectionSolver::FixedPoint => unloaded
                 .par_iter()
                 .map_init(
                     || TrueState::new(&self.world.robot),
-                    |state, q0| {
-                        q0.as_ref()
-                            .map(|q0| {
+                    |state, u| {
+                        u.as_ref()
+                            .map(|(q0, scale)| {
                                 state.q0.copy_from_slice(q0);
-                                self.world.robot.deflect(state).map(|_| state.q.clone())
+                                state.scale = *scale;
+                                self.world
+                                    .robot
+                                    .deflect(state)
+                                    .map(|_| (state.deflection(), *scale))
                             })
                             .transpose()
                     },
@@ -565,9 +589,17 @@ impl Generator<'_> {
                     .physics_reference(SettleOptions::default())?;
                 unloaded
                     .iter()
-                    .map(|q0| {
-                        q0.as_ref()
-                            .map(|q0| physics.settle(q0).map(|s| s.q))
+                    .map(|u| {
+                        u.as_ref()
+                            .map(|(q0, scale)| {
+                                physics.settle(q0).map(|s| {
+                                    let settled = Deflection {
+                                        q: s.q,
+                                        tilt: Vec::new(),
+                                    };
+                                    (settled, *scale)
+                                })
+                            })
                             .transpose()
                     })
                     .collect()
@@ -575,20 +607,22 @@ impl Generator<'_> {
         }
     }
 
-    /// Whether the tracker sees every reflector of the true arm at `q_link` (deflected link angles), with the
+    /// Whether the tracker sees every reflector of the true arm `settled` (deflected link angles and tilts, links
+    /// scaled by `scale`), with the
     /// repeatability draw of the visit keyed `stream` (the one its measurement will make): each reflector's
     /// acceptance cone faces the tracker, and no link blocks the beam.
     fn visible(
         &self,
         stream: [u64; 3],
-        q_link: &[f64],
+        settled: &Deflection,
+        scale: f64,
         collision: &CollisionModel,
         work: &mut Work,
     ) -> std::result::Result<(), Reason> {
         let mut rng = derive(self.seed, Stream::Measurement, &stream);
         self.world
             .robot
-            .reach_with_angles(q_link, Some(&mut rng), &mut work.state);
+            .reach_with_angles(settled, scale, Some(&mut rng), &mut work.state);
         let true_flange = work.state.frames.flange;
         let origin = self.world.tracker.origin();
         let facing = true_flange.rotation * self.world.mounting.facing;

@@ -10,7 +10,7 @@ pub mod sequence;
 pub use distribution::{DistributionKind, PointDistribution};
 pub use generate::{Campaign, CampaignPoint, Generator, Rejections, Selector};
 pub use region::{CampaignConfig, RegionConfig};
-pub use sequence::Visit;
+pub use sequence::Stop;
 
 use crate::world::World;
 

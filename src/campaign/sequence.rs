@@ -7,11 +7,12 @@ use std::collections::BTreeMap;
 use nalgebra::Point3;
 use rayon::prelude::*;
 
-use super::generate::{Campaign, CampaignPoint, Generator, Rejections};
+use super::generate::{Campaign, CampaignPoint, Generator, Rejections, Unloaded};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::Chain;
 use crate::robot::kinematics::forward_kinematics;
+use crate::truth::{TrueState, history};
 
 /// A replayed campaign draws its noise with this as the attempt index: above the planned campaigns' attempts
 /// and the ground-truth sets' (`GROUND_TRUTH_ATTEMPT + set`), so it never shares their streams. A simulated
@@ -20,7 +21,7 @@ pub const REPLAY_ATTEMPT: u64 = 1 << 33;
 
 /// One stop of the arm's visit sequence.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Visit {
+pub struct Stop {
     /// The region (or replayed file) the point belongs to, for `measurements.csv`.
     pub region: String,
     /// Commanded joint angles (rad).
@@ -32,13 +33,16 @@ pub struct Visit {
 }
 
 impl Generator<'_> {
-    /// Measures `visits` in their order: the true arm reaches each command (zero offsets, transmission error,
-    /// static deflection, repeatability) and the tracker measures its reflectors. No feasibility is checked
-    /// here: a planned campaign chose its visits by their feasibility, and a replayed one was measured. Points
-    /// are numbered from 0 in visit order.
-    pub fn measure_sequence(&self, visits: &[Visit]) -> Result<Vec<CampaignPoint>> {
+    /// Measures `stops` in their order, as the sequence the arm visits from the campaign's posture: each stop's
+    /// history (the direction each joint came from, the links' temperature at its place in the sequence;
+    /// [`history::sequence`]), the true arm reaching the command (zero offsets, transmission error, lost motion,
+    /// thermal growth, static deflection, repeatability), and the tracker measuring its reflectors. No
+    /// feasibility is checked here: a planned campaign chose its stops by their feasibility, and a replayed one
+    /// was measured. Points are numbered from 0 in visit order.
+    pub fn measure_sequence(&self, stops: &[Stop]) -> Result<Vec<CampaignPoint>> {
+        let robot = &self.world.robot;
         let dof = self.world.nominal.dof();
-        if let Some((k, v)) = visits
+        if let Some((k, v)) = stops
             .iter()
             .enumerate()
             .find(|(_, v)| v.q_cmd.len() != dof || v.q_cmd.iter().any(|q| !q.is_finite()))
@@ -48,31 +52,39 @@ impl Generator<'_> {
                 v.q_cmd
             )));
         }
-        let unloaded: Vec<Option<Vec<f64>>> = (0..visits.len())
-            .into_par_iter()
+        let posture: Vec<f64> = self
+            .config
+            .posture_deg
+            .iter()
+            .map(|d| d.to_radians())
+            .collect();
+        let histories = history::sequence(
+            &robot.perturbation,
+            &posture,
+            stops.iter().map(|s| s.q_cmd.as_slice()),
+        );
+        let unloaded: Vec<Unloaded> = stops
+            .par_iter()
+            .zip(&histories)
             .map_init(
-                || vec![0.0; dof],
-                |q0, k| {
-                    self.unloaded(visits, k, q0);
-                    Some(q0.clone())
-                },
+                || TrueState::new(robot),
+                |state, (stop, history)| Some(self.unloaded(&stop.q_cmd, history, state)),
             )
             .collect();
-        let deflected = self.deflect_all(&unloaded)?;
-        Ok(visits
+        let settled = self.deflect_all(&unloaded)?;
+        Ok(stops
             .par_iter()
-            .zip(deflected)
+            .zip(settled)
+            .zip(&histories)
             .enumerate()
             .map_init(
                 || self.work(),
-                |work, (k, (visit, q_link))| {
-                    let q_link = q_link.expect("every visit has unloaded angles");
-                    let mut rng = derive(self.seed, Stream::Measurement, &visit.stream);
+                |work, (k, ((stop, settled), history))| {
+                    let (settled, scale) = settled.expect("every stop has unloaded angles");
+                    let mut rng = derive(self.seed, Stream::Measurement, &stop.stream);
                     // Repeatability first, then the tracker, from one stream: the order the feasibility
                     // check of a planned point draws in, so the check saw the pose measured here.
-                    self.world
-                        .robot
-                        .reach_with_angles(&q_link, Some(&mut rng), &mut work.state);
+                    robot.reach_with_angles(&settled, scale, Some(&mut rng), &mut work.state);
                     let true_flange = work.state.frames.flange;
                     let true_reflectors: Vec<Point3<f64>> = self
                         .world
@@ -85,12 +97,12 @@ impl Generator<'_> {
                         .iter()
                         .map(|p| self.world.tracker.measure(p, &mut rng))
                         .collect();
-                    forward_kinematics(&self.world.nominal, &visit.q_cmd, &mut work.frames);
+                    forward_kinematics(&self.world.nominal, &stop.q_cmd, &mut work.frames);
                     let nominal_flange = work.frames.flange;
                     CampaignPoint {
                         id: k,
-                        region: visit.region.clone(),
-                        q_cmd: visit.q_cmd.clone(),
+                        region: stop.region.clone(),
+                        q_cmd: stop.q_cmd.clone(),
                         nominal_flange,
                         nominal_reflectors: self
                             .world
@@ -107,17 +119,11 @@ impl Generator<'_> {
                             .collect(),
                         true_reflectors,
                         q_true: work.state.q.clone(),
+                        temperature: history.temperature,
                     }
                 },
             )
             .collect())
-    }
-
-    /// The arm's unloaded joint angles at the `k`-th visit. What makes the true arm depend on its place in the
-    /// sequence (the previous command for hysteresis, the index for a warm-up) enters here, so that planned
-    /// and replayed campaigns get it alike.
-    fn unloaded(&self, visits: &[Visit], k: usize, out: &mut [f64]) {
-        self.world.robot.unloaded_angles(&visits[k].q_cmd, out);
     }
 
     /// A real campaign's commands measured in this world, in their order, as region `region`: no layout, no
@@ -137,19 +143,19 @@ impl Generator<'_> {
     ) -> Result<Campaign> {
         let chain = &self.world.nominal;
         check_replayable(chain, origin, ids, commands)?;
-        let visits: Vec<Visit> = commands
+        let stops: Vec<Stop> = commands
             .iter()
             .enumerate()
-            .map(|(k, q)| Visit {
+            .map(|(k, q)| Stop {
                 region: region.to_string(),
                 q_cmd: q.clone(),
                 stream: [replay, REPLAY_ATTEMPT, k as u64],
             })
             .collect();
-        let n = visits.len();
+        let n = stops.len();
         Ok(Campaign {
             joint_names: chain.joint_names(),
-            points: self.measure_sequence(&visits)?,
+            points: self.measure_sequence(&stops)?,
             rejections: BTreeMap::from([(
                 region.to_string(),
                 Rejections {

@@ -3,8 +3,8 @@
 //!
 //! Columns are found by name, so their order does not matter and unknown columns are ignored. Only the
 //! robot's joint columns and the tracker measurements `x1, y1, z1` (with `x2…z3` for a three-reflector
-//! nest) are required; the other groups (`point_id`, `region`, `split`, `nom_*`, `flange_*`) are read
-//! when present and must then be complete. Every fault is reported on one line naming the row as a
+//! nest) are required; the other groups (`point_id`, `region`, `split`, `nom_*`, `flange_*`, `temperature`,
+//! the last an extra input a method may regress on) are read when present and must then be complete. Every fault is reported on one line naming the row as a
 //! spreadsheet shows it (the header is row 1, the first data row is row 2) and the column.
 //!
 //! A foreign export (another delimiter, decimal commas, millimetres and degrees, a 6-DoF probe's orientation, a
@@ -37,6 +37,9 @@ pub const FLANGE_COLUMNS: [&str; 7] = [
     "flange_qy",
     "flange_qz",
 ];
+
+/// The temperature column (°C) of a measurements file: read as the extra input `temperature`.
+pub const TEMPERATURE_COLUMN: &str = "temperature";
 
 /// The points of a measurement campaign, as a calibration method may see them.
 #[derive(Clone, Debug)]
@@ -111,6 +114,7 @@ impl Dataset {
         let flange_cols = table.group(&FLANGE_COLUMNS)?;
         let split_col = table.column("split");
         let region_col = table.column("region");
+        let temperature_col = table.column(TEMPERATURE_COLUMN);
 
         let n = table.rows.len();
         let point_ids = table.point_ids()?;
@@ -120,7 +124,11 @@ impl Dataset {
         let mut flange = flange_cols.as_ref().map(|_| Vec::with_capacity(n));
         let mut split = split_col.map(|_| Vec::with_capacity(n));
         let mut regions = region_col.map(|_| Vec::with_capacity(n));
+        let mut temperature = temperature_col.map(|_| Vec::with_capacity(n));
         for r in 0..n {
+            if let (Some(out), Some(c)) = (&mut temperature, temperature_col) {
+                out.push(vec![table.number(r, c)?]);
+            }
             q.push(table.numbers(r, &joints)?);
             measured.push(table.points(r, &measured_cols)?);
             if let (Some(out), Some(cols)) = (&mut nominal, &nominal_cols) {
@@ -147,7 +155,10 @@ impl Dataset {
             split,
             regions,
             measured_orientation: None,
-            extra_inputs: None,
+            extra_inputs: temperature.map(|values| ExtraInputs {
+                names: vec![TEMPERATURE_COLUMN.to_string()],
+                values,
+            }),
         })
     }
 

@@ -57,19 +57,74 @@ pub fn gravity_pass(
     out: &mut [f64],
     joint: impl Fn(usize) -> GravityJoint,
 ) {
+    gravity_pass_full(payload, flange, gravity, out, None, joint);
+}
+
+/// [`gravity_pass`] that also gives, when `moments` is given, the full gravity moment (Nm, world frame) about
+/// each revolute joint's anchor of everything beyond it — the axial torque is its component along the axis;
+/// the rest loads the joint's bearings and links (a prismatic joint's entry is zero).
+pub fn gravity_pass_full(
+    payload: &Payload,
+    flange: &Isometry3<f64>,
+    gravity: &Vector3<f64>,
+    out: &mut [f64],
+    mut moments: Option<&mut [Vector3<f64>]>,
+    joint: impl Fn(usize) -> GravityJoint,
+) {
     let mut mass = payload.mass;
     let mut moment = (flange * Point3::from(payload.com)).coords * payload.mass;
     for i in (0..out.len()).rev() {
         let j = joint(i);
         mass += j.mass;
         moment += j.com.coords * j.mass;
+        let full = if j.prismatic {
+            Vector3::zeros()
+        } else {
+            let lever = moment - j.anchor.coords * mass;
+            lever.cross(gravity)
+        };
         out[i] = if j.prismatic {
             j.axis.dot(&(gravity * mass))
         } else {
-            let lever = moment - j.anchor.coords * mass;
-            j.axis.dot(&lever.cross(gravity))
+            j.axis.dot(&full)
         };
+        if let Some(m) = moments.as_deref_mut() {
+            m[i] = full;
+        }
     }
+}
+
+/// [`gravity_torques`] and the full gravity moment about every joint's anchor (world frame, Nm): what a
+/// compliance about the axes perpendicular to a joint (bearing tilt, link bending) responds to.
+pub fn gravity_moments(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    torques: &mut [f64],
+    moments: &mut [Vector3<f64>],
+) {
+    assert!(
+        torques.len() == chain.dof() && moments.len() == chain.dof(),
+        "output lengths must equal the chain's dof"
+    );
+    gravity_pass_full(
+        payload,
+        &frames.flange,
+        gravity,
+        torques,
+        Some(moments),
+        |i| {
+            let body = &chain.bodies[i + 1];
+            GravityJoint {
+                mass: body.inertial.mass,
+                com: frames.body[i + 1] * body.inertial.com,
+                axis: frames.axis(chain, i),
+                anchor: frames.anchor(i),
+                prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
+            }
+        },
+    );
 }
 
 /// Gravitational potential energy (J) relative to the world origin.

@@ -19,6 +19,14 @@ fn default_cone() -> f64 {
     30.0
 }
 
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_zero2(v: &[f64; 2]) -> bool {
+    *v == [0.0; 2]
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TrackerConfig {
@@ -42,10 +50,23 @@ pub struct TrackerConfig {
     /// measured a probe's orientation uses it.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub orientation_sigma_rad: f64,
-}
-
-fn is_zero(v: &f64) -> bool {
-    *v == 0.0
+    // Systematic errors the tracker's own compensation leaves (none by default): the same on every
+    // measurement, so registration cannot average them away.
+    /// Constant error of the range (ADM / bird-bath offset), m.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub range_offset_m: f64,
+    /// Range scale error (m per m): a residual of the air's refractive index compensation.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub range_scale: f64,
+    /// Eccentricity of the azimuth encoder: error `e0 cos(az) + e1 sin(az)` of the azimuth, rad.
+    #[serde(default, skip_serializing_if = "is_zero2")]
+    pub azimuth_eccentricity_rad: [f64; 2],
+    /// Eccentricity of the elevation encoder: error `e0 cos(el) + e1 sin(el)` of the elevation, rad.
+    #[serde(default, skip_serializing_if = "is_zero2")]
+    pub elevation_eccentricity_rad: [f64; 2],
+    /// Vertical index offset: a constant error of the elevation, rad.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub vertical_index_offset_rad: f64,
 }
 
 impl TrackerConfig {
@@ -72,6 +93,15 @@ impl TrackerConfig {
             self.tilt_deg[1].to_radians(),
             self.yaw_deg.to_radians(),
         )
+    }
+
+    /// Whether the tracker has any systematic error.
+    pub fn has_systematic(&self) -> bool {
+        self.range_offset_m != 0.0
+            || self.range_scale != 0.0
+            || !is_zero2(&self.azimuth_eccentricity_rad)
+            || !is_zero2(&self.elevation_eccentricity_rad)
+            || self.vertical_index_offset_rad != 0.0
     }
 }
 
@@ -102,6 +132,32 @@ impl Tracker {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(&format!("{name} must be finite and non-negative, got {v}"));
             }
+        }
+        let systematic = [
+            ("range_offset_m", c.range_offset_m),
+            ("range_scale", c.range_scale),
+            ("azimuth_eccentricity_rad", c.azimuth_eccentricity_rad[0]),
+            ("azimuth_eccentricity_rad", c.azimuth_eccentricity_rad[1]),
+            (
+                "elevation_eccentricity_rad",
+                c.elevation_eccentricity_rad[0],
+            ),
+            (
+                "elevation_eccentricity_rad",
+                c.elevation_eccentricity_rad[1],
+            ),
+            ("vertical_index_offset_rad", c.vertical_index_offset_rad),
+        ];
+        for (name, v) in systematic {
+            if !v.is_finite() {
+                return bad(&format!("{name} must be finite, got {v}"));
+            }
+        }
+        if c.range_scale.abs() >= 0.01 {
+            return bad(&format!(
+                "range_scale must be a small relative error (|s| < 0.01), got {}",
+                c.range_scale
+            ));
         }
         let cone = c.acceptance_half_angle_deg;
         if !(cone > 0.0 && cone < 90.0) {
@@ -140,7 +196,12 @@ impl Tracker {
         let n_az: f64 = rng.sample(StandardNormal);
         let n_el: f64 = rng.sample(StandardNormal);
         let c = &self.config;
-        if c.range_sigma_m == 0.0 && c.range_sigma_per_m == 0.0 && c.angle_sigma_rad == 0.0 {
+        let systematic = c.has_systematic();
+        if c.range_sigma_m == 0.0
+            && c.range_sigma_per_m == 0.0
+            && c.angle_sigma_rad == 0.0
+            && !systematic
+        {
             // Exact, rather than through a spherical round trip that would cost a few ulps.
             return p;
         }
@@ -148,9 +209,18 @@ impl Tracker {
         let range = p.coords.norm();
         let azimuth = p.y.atan2(p.x);
         let elevation = p.z.atan2(horizontal);
-        let r = range + self.range_sigma(range) * n_range;
-        let az = azimuth + c.angle_sigma_rad * n_az;
-        let el = elevation + c.angle_sigma_rad * n_el;
+        let mut r = range + self.range_sigma(range) * n_range;
+        let mut az = azimuth + c.angle_sigma_rad * n_az;
+        let mut el = elevation + c.angle_sigma_rad * n_el;
+        if systematic {
+            let (sa, ca) = azimuth.sin_cos();
+            let (se, ce) = elevation.sin_cos();
+            let [a0, a1] = c.azimuth_eccentricity_rad;
+            let [e0, e1] = c.elevation_eccentricity_rad;
+            r += c.range_offset_m + c.range_scale * range;
+            az += a0 * ca + a1 * sa;
+            el += e0 * ce + e1 * se + c.vertical_index_offset_rad;
+        }
         let (sa, ca) = az.sin_cos();
         let (se, ce) = el.sin_cos();
         Point3::new(r * ce * ca, r * ce * sa, r * se)

@@ -1,7 +1,12 @@
 //! The true robot: what the real arm has and the controller does not know.
+pub mod history;
 pub mod perturbation;
 pub mod physics;
 pub mod robot;
+pub mod stiffness;
+pub mod thermal;
 
+pub use history::Visit;
 pub use perturbation::{ErrorModel, Perturbation};
 pub use robot::{DeflectionSolver, TrueRobot, TrueState};
+pub use thermal::ThermalProfile;

@@ -8,7 +8,21 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use super::robot::DeflectionSolver;
+use super::stiffness::SoftZone;
+use super::thermal::ThermalProfile;
 use crate::error::{Error, Result};
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn unit_ratio() -> [f64; 2] {
+    [1.0, 1.0]
+}
+
+fn is_unit_ratio(v: &[f64; 2]) -> bool {
+    *v == unit_ratio()
+}
 
 /// Error magnitudes of the true robot, all one-sigma of zero-mean normal draws unless said otherwise.
 /// SI units: metres, radians, newton-metres per radian.
@@ -42,9 +56,69 @@ pub struct ErrorModel {
     /// How the static deflection is solved: `fixed-point` (fast, default) or `rapier` (the physics reference).
     #[serde(default)]
     pub deflection: DeflectionSolver,
+    // The error sources no method models exactly. Each is off by default (and then left out of
+    // `campaign.json`, so a scenario without them gives the files it always gave).
+    /// Relative one-sigma scatter of each moving link's true mass about the URDF's.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub link_mass_spread: f64,
+    /// One-sigma offset of each moving link's true centre of mass from the URDF's, per axis (m).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub link_com_m: f64,
+    /// Cables and dress pack along the arm (kg per metre of link), lumped at the middle of each link.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub cable_kg_per_m: f64,
+    /// Strain-wave gear ratio per joint: the wave generator turns `ratio` times per output revolution.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gear_ratio: Vec<u32>,
+    /// Amplitude of the transmission error at `ratio` and at `2·ratio` cycles per output revolution (rad).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub gear_wave_amplitude_rad: f64,
+    /// Lost motion: full width of a joint's hysteresis band (rad); the joint lags by half of it behind the
+    /// direction it last moved in.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hysteresis_rad: f64,
+    /// Soft zone per joint: the catalogue's torque limits `[T1, T2]` (Nm) of the low-torque stiffness ranges.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub soft_zone_torque_nm: Vec<[f64; 2]>,
+    /// `[K1/K3, K2/K3]`: the stiffness below T1 and between T1 and T2 relative to the true stiffness (K3).
+    #[serde(default = "unit_ratio", skip_serializing_if = "is_unit_ratio")]
+    pub soft_zone_stiffness_ratio: [f64; 2],
+    /// Stiffness about the two axes perpendicular to each joint (bearing tilt and link bending), Nm/rad.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tilt_stiffness_nm_per_rad: Vec<f64>,
+    /// Thermal growth of the links over the campaign (a warm-up); none by default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal: Option<ThermalProfile>,
 }
 
 impl ErrorModel {
+    /// A robot with joint stiffness `stiffness` and no other error: a base to set some errors on.
+    pub fn stiff_only(stiffness: Vec<f64>) -> ErrorModel {
+        ErrorModel {
+            frame_translation_m: 0.0,
+            frame_rotation_rad: 0.0,
+            joint_zero_rad: 0.0,
+            base_translation_m: 0.0,
+            base_rotation_rad: 0.0,
+            stiffness_nm_per_rad: stiffness,
+            stiffness_spread: 0.0,
+            gear_orders: Vec::new(),
+            gear_amplitude_rad: 0.0,
+            repeatability_rad: 0.0,
+            deflection: DeflectionSolver::FixedPoint,
+            link_mass_spread: 0.0,
+            link_com_m: 0.0,
+            cable_kg_per_m: 0.0,
+            gear_ratio: Vec::new(),
+            gear_wave_amplitude_rad: 0.0,
+            hysteresis_rad: 0.0,
+            soft_zone_torque_nm: Vec::new(),
+            soft_zone_stiffness_ratio: unit_ratio(),
+            tilt_stiffness_nm_per_rad: Vec::new(),
+            thermal: None,
+        }
+    }
+
     pub fn validate(&self, dof: usize) -> Result<()> {
         let bad = |m: String| Err(Error::Invalid(m));
         let scalars = [
@@ -56,6 +130,11 @@ impl ErrorModel {
             ("stiffness_spread", self.stiffness_spread),
             ("gear_amplitude_rad", self.gear_amplitude_rad),
             ("repeatability_rad", self.repeatability_rad),
+            ("link_mass_spread", self.link_mass_spread),
+            ("link_com_m", self.link_com_m),
+            ("cable_kg_per_m", self.cable_kg_per_m),
+            ("gear_wave_amplitude_rad", self.gear_wave_amplitude_rad),
+            ("hysteresis_rad", self.hysteresis_rad),
         ];
         for (name, v) in scalars {
             if !(v.is_finite() && v >= 0.0) {
@@ -81,6 +160,67 @@ impl ErrorModel {
         }
         if self.stiffness_spread >= 0.5 {
             return bad("truth.stiffness_spread must be below 0.5 (a relative scatter)".into());
+        }
+        if self.link_mass_spread >= 0.5 {
+            return bad("truth.link_mass_spread must be below 0.5 (a relative scatter)".into());
+        }
+        let per_joint = |name: &str, len: usize| {
+            if len != 0 && len != dof {
+                bad(format!(
+                    "truth.{name} has {len} values, the robot has {dof} joints (or leave it out)"
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        per_joint("gear_ratio", self.gear_ratio.len())?;
+        per_joint("soft_zone_torque_nm", self.soft_zone_torque_nm.len())?;
+        per_joint(
+            "tilt_stiffness_nm_per_rad",
+            self.tilt_stiffness_nm_per_rad.len(),
+        )?;
+        if self.gear_wave_amplitude_rad > 0.0 && self.gear_ratio.is_empty() {
+            return bad(
+                "truth.gear_wave_amplitude_rad needs truth.gear_ratio (one per joint)".into(),
+            );
+        }
+        if self.gear_ratio.contains(&0) {
+            return bad("truth.gear_ratio has 0; every ratio must be at least 1".into());
+        }
+        if let Some([t1, t2]) = self
+            .soft_zone_torque_nm
+            .iter()
+            .find(|[t1, t2]| !(t1.is_finite() && t2.is_finite() && *t1 >= 0.0 && t1 <= t2))
+        {
+            return bad(format!(
+                "truth.soft_zone_torque_nm has [{t1}, {t2}]; each pair must be 0 ≤ T1 ≤ T2, finite"
+            ));
+        }
+        let [r1, r2] = self.soft_zone_stiffness_ratio;
+        if !(r1 > 0.0 && r1 <= r2 && r2 <= 1.0) {
+            return bad(format!(
+                "truth.soft_zone_stiffness_ratio = [{r1}, {r2}] must satisfy 0 < K1/K3 ≤ K2/K3 ≤ 1"
+            ));
+        }
+        if let Some(k) = self
+            .tilt_stiffness_nm_per_rad
+            .iter()
+            .find(|k| !(k.is_finite() && **k > 0.0))
+        {
+            return bad(format!(
+                "truth.tilt_stiffness_nm_per_rad has {k}; every stiffness must be positive"
+            ));
+        }
+        if !self.tilt_stiffness_nm_per_rad.is_empty() && self.deflection == DeflectionSolver::Rapier
+        {
+            return bad(
+                "truth.tilt_stiffness_nm_per_rad needs deflection = \"fixed-point\": the rapier reference \
+                 has no compliance about the axes perpendicular to the joints"
+                    .into(),
+            );
+        }
+        if let Some(t) = &self.thermal {
+            t.validate()?;
         }
         Ok(())
     }
@@ -134,6 +274,27 @@ pub struct Perturbation {
     pub stiffness: Vec<f64>,
     pub gear: Vec<Vec<GearHarmonic>>,
     pub repeatability_rad: f64,
+    /// True mass of each moving link relative to the URDF's (one per joint, the link it moves); empty: as the
+    /// URDF.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub link_mass_factor: Vec<f64>,
+    /// Offset of each moving link's true centre of mass from the URDF's, in the link frame (m); empty: none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub link_com_offset: Vec<[f64; 3]>,
+    /// Cable load along the links (kg/m).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub cable_kg_per_m: f64,
+    /// Full width of each joint's hysteresis band (rad).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hysteresis_rad: f64,
+    /// Load-dependent torsional stiffness per joint (its K3 is `stiffness`); empty: linear joints.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub soft_zone: Vec<SoftZone>,
+    /// Stiffness about the axes perpendicular to each joint (Nm/rad); empty: none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tilt_stiffness: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal: Option<ThermalProfile>,
 }
 
 impl Perturbation {
@@ -165,14 +326,54 @@ impl Perturbation {
                     .collect()
             })
             .collect();
-        Ok(Perturbation {
+        let mut p = Perturbation {
             base,
             joint_frames,
             joint_zero,
             stiffness,
             gear,
             repeatability_rad: model.repeatability_rad,
-        })
+            ..Perturbation::rigid_geometry(Vec::new())
+        };
+        // Drawn after everything above, so a scenario without these errors draws the same robot as before.
+        if model.link_mass_spread > 0.0 || model.link_com_m > 0.0 {
+            for _ in 0..dof {
+                p.link_mass_factor
+                    .push((1.0 + normal(rng, model.link_mass_spread)).max(0.5));
+                let c = model.link_com_m;
+                p.link_com_offset
+                    .push([normal(rng, c), normal(rng, c), normal(rng, c)]);
+            }
+        }
+        if model.gear_wave_amplitude_rad > 0.0 {
+            for (gear, &ratio) in p.gear.iter_mut().zip(&model.gear_ratio) {
+                for order in [ratio, 2 * ratio] {
+                    gear.push(GearHarmonic {
+                        order,
+                        amplitude: model.gear_wave_amplitude_rad,
+                        phase: rng.random_range(0.0..std::f64::consts::TAU),
+                    });
+                }
+            }
+        }
+        let [r1, r2] = model.soft_zone_stiffness_ratio;
+        p.soft_zone = model
+            .soft_zone_torque_nm
+            .iter()
+            .zip(&p.stiffness)
+            .map(|(&[t1, t2], &k3)| SoftZone {
+                t1,
+                t2,
+                k1: r1 * k3,
+                k2: r2 * k3,
+                k3,
+            })
+            .collect();
+        p.cable_kg_per_m = model.cable_kg_per_m;
+        p.hysteresis_rad = model.hysteresis_rad;
+        p.tilt_stiffness = model.tilt_stiffness_nm_per_rad.clone();
+        p.thermal = model.thermal.clone();
+        Ok(p)
     }
 
     /// A perturbation that changes nothing but the stiffness: the nominal geometry made compliant.
@@ -185,6 +386,13 @@ impl Perturbation {
             stiffness,
             gear: vec![Vec::new(); dof],
             repeatability_rad: 0.0,
+            link_mass_factor: Vec::new(),
+            link_com_offset: Vec::new(),
+            cable_kg_per_m: 0.0,
+            hysteresis_rad: 0.0,
+            soft_zone: Vec::new(),
+            tilt_stiffness: Vec::new(),
+            thermal: None,
         }
     }
 

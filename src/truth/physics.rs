@@ -26,6 +26,7 @@ use rapier3d::prelude::{
 };
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot, urdf_rs};
 
+use super::stiffness::SoftZone;
 use crate::error::{Error, Result};
 
 /// Index of the URDF joint axis in rapier's 6-DoF joint layout (`AngX`): the loader aligns the
@@ -87,6 +88,8 @@ pub struct PhysicsReference {
     world: PhysicsWorld,
     joints: Vec<JointSlot>,
     opts: SettleOptions,
+    /// Load-dependent stiffness per joint (empty: the linear springs of `joints`).
+    soft_zones: Vec<SoftZone>,
 }
 
 impl std::fmt::Debug for PhysicsReference {
@@ -267,6 +270,7 @@ impl PhysicsReference {
             world,
             joints,
             opts,
+            soft_zones: Vec::new(),
         };
         {
             let first = reference.joints[0].handle;
@@ -301,6 +305,48 @@ impl PhysicsReference {
     /// The movable joints, in the caller's order.
     pub fn joint_names(&self) -> Vec<&str> {
         self.joints.iter().map(|j| j.name.as_str()).collect()
+    }
+
+    /// Gives every joint the soft zone's torsion curve instead of its linear spring (one per joint). Rapier's
+    /// springs are linear, so before every step each joint's spring is set to the line of the curve's range
+    /// its current deflection lies in ([`SoftZone::segment`]); at rest the joint sits on the curve.
+    pub fn set_soft_zones(&mut self, zones: &[SoftZone]) -> Result<()> {
+        if !zones.is_empty() && zones.len() != self.joints.len() {
+            return Err(Error::Invalid(format!(
+                "physics reference: {} soft zones for {} joints",
+                zones.len(),
+                self.joints.len()
+            )));
+        }
+        self.soft_zones = zones.to_vec();
+        Ok(())
+    }
+
+    /// Sets each soft-zone joint's spring to its curve's line at the current angles `q`.
+    fn follow_soft_zones(
+        &mut self,
+        links: &[(usize, usize)],
+        rest: &[f64],
+        q: &[f64],
+    ) -> Result<()> {
+        if self.soft_zones.is_empty() {
+            return Ok(());
+        }
+        let (mb, _) = self
+            .world
+            .multibody_joints
+            .get_mut(self.joints[0].handle)
+            .ok_or_else(|| Error::Physics("multibody lost".into()))?;
+        for (((zone, &(link_id, _)), &r), &qi) in self.soft_zones.iter().zip(links).zip(rest).zip(q)
+        {
+            let (k, offset) = zone.segment(qi - r);
+            let link = mb
+                .link_mut(link_id)
+                .ok_or_else(|| Error::Physics("multibody link lost".into()))?;
+            link.joint
+                .set_spring(ANG_X, k as Real, (r + offset) as Real);
+        }
+        Ok(())
     }
 
     /// The settle options in use.
@@ -411,6 +457,7 @@ impl PhysicsReference {
         let mut quiet = 0usize;
         let mut last_change = f64::INFINITY;
         for step in 1..=self.opts.max_steps {
+            self.follow_soft_zones(&links, rest, &prev)?;
             self.world.step();
             self.read_q(&links, &mut q)?;
             if q.iter().any(|v| !v.is_finite()) {

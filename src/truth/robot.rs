@@ -1,20 +1,26 @@
 //! The true robot: the nominal chain with a [`Perturbation`] applied, and how it actually reaches a command.
 //!
-//! A command `q_cmd` becomes the unloaded joint angle `q0 = q_cmd + zero offset + gear error`; the compliant
-//! joints then settle where `K (q − q0) = τ_g(q)`, gravity and payload included; repeatability noise is
-//! added last. The fast path solves that equilibrium by fixed point (a contraction: ‖K⁻¹ ∂τ/∂q‖ ≪ 1 for any
-//! real arm); [`super::physics`] is the rapier reference it is checked against.
+//! A command `q_cmd` becomes the unloaded joint angle `q0 = q_cmd + zero offset + gear error (+ half the
+//! hysteresis band, by the direction the joint last moved in)`; the compliant joints then settle where
+//! `θ_i(τ_i(q)) = q_i − q0_i` (θ the joint's torsion curve: `τ/K`, or the soft zone's piecewise curve) and each
+//! joint tilts about its perpendicular axes by the perpendicular gravity moment over the tilt stiffness,
+//! gravity and payload acting on the *true* link inertials; link lengths follow the temperature; repeatability
+//! noise is added last. The fast path solves that equilibrium by fixed point (a contraction: the largest
+//! compliance times ‖∂τ/∂q‖ stays ≪ 1 for any real arm); [`super::physics`] is the rapier reference it is
+//! checked against.
 
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use super::history::{Visit, approach};
 use super::perturbation::Perturbation;
+use super::stiffness::tilt;
 use crate::error::{Error, Result};
-use crate::robot::dynamics::{GRAVITY, gravity_torques};
+use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
 use crate::robot::kinematics::forward_kinematics;
-use crate::robot::{Chain, Frames, Payload};
+use crate::robot::{Chain, Frames, Inertial, Payload};
 
 /// How the static deflection is computed in a campaign.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
@@ -29,12 +35,25 @@ pub enum DeflectionSolver {
 
 #[derive(Clone, Debug)]
 pub struct TrueRobot {
-    /// The perturbed geometry: base offset and joint-frame offsets applied to the nominal chain.
+    /// The perturbed geometry (base offset and joint-frame offsets applied to the nominal chain) with the true
+    /// link inertials (URDF's, perturbed, plus cables): what gravity acts on.
     pub chain: Chain,
     pub perturbation: Perturbation,
     pub payload: Payload,
     pub gravity: Vector3<f64>,
     compliance: Vec<f64>,
+    /// Compliance about the axes perpendicular to each joint (rad/Nm); empty: none.
+    tilt_compliance: Vec<f64>,
+    /// The posture evaluation poses are approached from ([`TrueRobot::flange_pose`]).
+    approach: Vec<f64>,
+}
+
+/// The settled arm: link-side joint angles (rad) and each joint's tilt about its perpendicular axes (rotation
+/// vector in the joint frame, rad; empty without tilt compliance).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Deflection {
+    pub q: Vec<f64>,
+    pub tilt: Vec<Vector3<f64>>,
 }
 
 /// Per-call workspace of the true robot.
@@ -46,7 +65,12 @@ pub struct TrueState {
     pub frames: Frames,
     /// Unloaded angles of the last reach (rad).
     pub q0: Vec<f64>,
+    /// Tilt of each joint about its perpendicular axes (rotation vector in the joint frame, rad).
+    pub tilt: Vec<Vector3<f64>>,
+    /// Factor on every link length (thermal growth) of the last reach.
+    pub scale: f64,
     tau: Vec<f64>,
+    moments: Vec<Vector3<f64>>,
 }
 
 impl TrueState {
@@ -56,7 +80,18 @@ impl TrueState {
             q: vec![0.0; n],
             frames: Frames::new(&robot.chain),
             q0: vec![0.0; n],
+            tilt: vec![Vector3::zeros(); n],
+            scale: 1.0,
             tau: vec![0.0; n],
+            moments: vec![Vector3::zeros(); n],
+        }
+    }
+
+    /// The settled arm of the last reach.
+    pub fn deflection(&self) -> Deflection {
+        Deflection {
+            q: self.q.clone(),
+            tilt: self.tilt.clone(),
         }
     }
 }
@@ -74,14 +109,21 @@ impl TrueRobot {
             perturbation.stiffness.len(),
             perturbation.gear.len(),
         ];
-        if lengths.iter().any(|&l| l != n) {
+        let optional = [
+            perturbation.link_mass_factor.len(),
+            perturbation.link_com_offset.len(),
+            perturbation.soft_zone.len(),
+            perturbation.tilt_stiffness.len(),
+        ];
+        if lengths.iter().any(|&l| l != n) || optional.iter().any(|&l| l != 0 && l != n) {
             return Err(Error::Invalid(format!(
-                "perturbation sized for {lengths:?} joints, the robot has {n}"
+                "perturbation sized for {lengths:?} / {optional:?} joints, the robot has {n}"
             )));
         }
         if let Some(k) = perturbation
             .stiffness
             .iter()
+            .chain(&perturbation.tilt_stiffness)
             .find(|k| !(k.is_finite() && **k > 0.0))
         {
             return Err(Error::Invalid(format!(
@@ -100,14 +142,46 @@ impl TrueRobot {
         for (joint, offset) in chain.joints.iter_mut().zip(&perturbation.joint_frames) {
             joint.origin *= offset.isometry();
         }
+        true_inertials(&mut chain, &perturbation);
         let compliance = perturbation.stiffness.iter().map(|k| 1.0 / k).collect();
+        let tilt_compliance = perturbation
+            .tilt_stiffness
+            .iter()
+            .map(|k| 1.0 / k)
+            .collect();
         Ok(TrueRobot {
             chain,
             perturbation,
             payload,
             gravity: GRAVITY,
             compliance,
+            tilt_compliance,
+            approach: vec![0.0; n],
         })
+    }
+
+    /// Sets the posture evaluation poses are approached from (the campaign's posture); the zero
+    /// configuration until set.
+    pub fn set_approach(&mut self, posture: &[f64]) {
+        if posture.len() == self.approach.len() {
+            self.approach.copy_from_slice(posture);
+        }
+    }
+
+    /// The posture evaluation poses are approached from.
+    pub fn approach(&self) -> &[f64] {
+        &self.approach
+    }
+
+    /// Whether a reach depends on its history (lost motion, a temperature profile): then the order of a
+    /// campaign matters.
+    pub fn has_history(&self) -> bool {
+        self.perturbation.hysteresis_rad > 0.0 || self.perturbation.thermal.is_some()
+    }
+
+    /// Whether joints tilt about their perpendicular axes.
+    pub fn tilts(&self) -> bool {
+        !self.tilt_compliance.is_empty()
     }
 
     /// Joint angles the arm would hold without any load: command, zero offset and transmission error.
@@ -117,36 +191,116 @@ impl TrueRobot {
         }
     }
 
-    /// Solves the static equilibrium from the unloaded angles `state.q0` by fixed point; on return `state.q` holds the
-    /// deflected angles and `state.frames` their frames. Returns the iterations used.
+    /// [`TrueRobot::unloaded_angles`] after the history `visit`: each joint lags half the hysteresis band behind
+    /// the direction it last moved in.
+    pub fn unloaded_angles_after(&self, q_cmd: &[f64], visit: &Visit, out: &mut [f64]) {
+        self.unloaded_angles(q_cmd, out);
+        let half = 0.5 * self.perturbation.hysteresis_rad;
+        if half > 0.0 {
+            for (o, d) in out.iter_mut().zip(&visit.direction) {
+                *o -= d * half;
+            }
+        }
+    }
+
+    /// The factor on every link length at the visit's temperature (1 without a thermal profile).
+    pub fn length_scale(&self, visit: &Visit) -> f64 {
+        match (&self.perturbation.thermal, visit.temperature) {
+            (Some(t), Some(temperature)) => t.scale(temperature),
+            _ => 1.0,
+        }
+    }
+
+    /// The true chain's frames at link angles `q`, tilts `tilt` and link lengths × `scale`. Growing every link
+    /// translation by one factor scales every frame's position about the base, as a uniformly warm arm does.
+    pub fn kinematics(&self, q: &[f64], tilt: &[Vector3<f64>], scale: f64, frames: &mut Frames) {
+        let tilting = self.tilts() && tilt.len() == q.len();
+        if !tilting && scale == 1.0 {
+            forward_kinematics(&self.chain, q, frames);
+            return;
+        }
+        let chain = &self.chain;
+        let mut pose = chain.base;
+        frames.body[0] = pose;
+        for (i, (joint, &qi)) in chain.joints.iter().zip(q).enumerate() {
+            let mut origin = joint.origin;
+            origin.translation.vector *= scale;
+            let mut joint_frame = pose * origin;
+            if tilting {
+                joint_frame *= UnitQuaternion::from_scaled_axis(tilt[i]);
+            }
+            frames.joint[i] = joint_frame;
+            pose = joint_frame * joint.motion(qi);
+            frames.body[i + 1] = pose;
+        }
+        let mut flange = chain.flange;
+        flange.translation.vector *= scale;
+        frames.flange = pose * flange;
+    }
+
+    /// Joint `i`'s torsion under torque `tau` (rad).
+    #[inline]
+    fn torsion(&self, i: usize, tau: f64) -> f64 {
+        match self.perturbation.soft_zone.get(i) {
+            Some(zone) => zone.deflection(tau),
+            None => self.compliance[i] * tau,
+        }
+    }
+
+    /// Solves the static equilibrium from the unloaded angles `state.q0` at link lengths × `state.scale` by
+    /// fixed point; on return `state.q` holds the deflected angles, `state.tilt` the tilts and `state.frames`
+    /// their frames. Returns the iterations used.
     pub fn deflect(&self, state: &mut TrueState) -> Result<usize> {
         state.q.copy_from_slice(&state.q0);
+        let tilting = self.tilts();
+        state.tilt.fill(Vector3::zeros());
         for iter in 1..=FIXED_POINT_MAX_ITERS {
-            forward_kinematics(&self.chain, &state.q, &mut state.frames);
-            gravity_torques(
-                &self.chain,
-                &state.frames,
-                &self.payload,
-                &self.gravity,
-                &mut state.tau,
-            );
+            self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+            if tilting {
+                gravity_moments(
+                    &self.chain,
+                    &state.frames,
+                    &self.payload,
+                    &self.gravity,
+                    &mut state.tau,
+                    &mut state.moments,
+                );
+            } else {
+                gravity_torques(
+                    &self.chain,
+                    &state.frames,
+                    &self.payload,
+                    &self.gravity,
+                    &mut state.tau,
+                );
+            }
             let mut step: f64 = 0.0;
-            for (((q, q0), c), tau) in state
+            for (i, ((q, q0), tau)) in state
                 .q
                 .iter_mut()
                 .zip(&state.q0)
-                .zip(&self.compliance)
                 .zip(&state.tau)
+                .enumerate()
             {
-                let next = q0 + c * tau;
+                let next = q0 + self.torsion(i, *tau);
                 step = step.max((next - *q).abs());
                 *q = next;
+            }
+            if tilting {
+                for (i, (t, c)) in state.tilt.iter_mut().zip(&self.tilt_compliance).enumerate() {
+                    let local = state.frames.joint[i]
+                        .rotation
+                        .inverse_transform_vector(&state.moments[i]);
+                    let next = tilt(&self.chain.joints[i].axis, &local, *c);
+                    step = step.max((next - *t).amax());
+                    *t = next;
+                }
             }
             if !step.is_finite() {
                 break;
             }
             if step < FIXED_POINT_TOL {
-                forward_kinematics(&self.chain, &state.q, &mut state.frames);
+                self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
                 return Ok(iter);
             }
         }
@@ -156,11 +310,23 @@ impl TrueRobot {
         )))
     }
 
-    /// The true arm reaching command `q_cmd`: unloaded angles, deflection, then repeatability noise when
-    /// `noise` is given. `state.frames` holds the reached frames on return.
+    /// The true arm reaching command `q_cmd` with no history (no lost motion, links at their reference
+    /// length): unloaded angles, deflection, then repeatability noise when `noise` is given.
+    /// `state.frames` holds the reached frames on return.
     pub fn reach(
         &self,
         q_cmd: &[f64],
+        noise: Option<&mut ChaCha8Rng>,
+        state: &mut TrueState,
+    ) -> Result<()> {
+        self.reach_after(q_cmd, &Visit::default(), noise, state)
+    }
+
+    /// [`TrueRobot::reach`] after the history `visit` (the direction each joint came from, the temperature).
+    pub fn reach_after(
+        &self,
+        q_cmd: &[f64],
+        visit: &Visit,
         noise: Option<&mut ChaCha8Rng>,
         state: &mut TrueState,
     ) -> Result<()> {
@@ -170,22 +336,31 @@ impl TrueRobot {
                 self.chain.dof()
             )));
         }
-        self.unloaded_angles(q_cmd, &mut state.q0);
+        self.unloaded_angles_after(q_cmd, visit, &mut state.q0);
+        state.scale = self.length_scale(visit);
         self.deflect(state)?;
         self.add_noise(noise, state);
         Ok(())
     }
 
-    /// Reach with the deflected angles given by another solver (the rapier reference).
+    /// Reach with the settled arm given by another solver (the rapier reference) or an earlier solve, at link
+    /// lengths × `scale`.
     pub fn reach_with_angles(
         &self,
-        q_link: &[f64],
+        settled: &Deflection,
+        scale: f64,
         noise: Option<&mut ChaCha8Rng>,
         state: &mut TrueState,
     ) {
-        state.q.copy_from_slice(q_link);
+        state.q.copy_from_slice(&settled.q);
+        if settled.tilt.len() == state.tilt.len() {
+            state.tilt.copy_from_slice(&settled.tilt);
+        } else {
+            state.tilt.fill(Vector3::zeros());
+        }
+        state.scale = scale;
         self.add_noise(noise, state);
-        forward_kinematics(&self.chain, &state.q, &mut state.frames);
+        self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
     }
 
     fn add_noise(&self, noise: Option<&mut ChaCha8Rng>, state: &mut TrueState) {
@@ -195,13 +370,20 @@ impl TrueRobot {
             for q in state.q.iter_mut() {
                 *q += normal.sample(rng);
             }
-            forward_kinematics(&self.chain, &state.q, &mut state.frames);
+            self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
         }
     }
 
-    /// True flange pose for a command (no repeatability noise): the ground truth of the evaluation.
+    /// How an evaluation pose `q_cmd` is reached: from the approach posture, at the end of the warm-up.
+    pub fn evaluation_visit(&self, q_cmd: &[f64]) -> Visit {
+        approach(&self.perturbation, &self.approach, q_cmd)
+    }
+
+    /// True flange pose for a command (no repeatability noise), reached as an evaluation pose
+    /// ([`TrueRobot::evaluation_visit`]): the ground truth of the evaluation.
     pub fn flange_pose(&self, q_cmd: &[f64], state: &mut TrueState) -> Result<Isometry3<f64>> {
-        self.reach(q_cmd, None, state)?;
+        let visit = self.evaluation_visit(q_cmd);
+        self.reach_after(q_cmd, &visit, None, state)?;
         Ok(state.frames.flange)
     }
 
@@ -216,18 +398,57 @@ impl TrueRobot {
         &self,
         opts: super::physics::SettleOptions,
     ) -> Result<super::physics::PhysicsReference> {
+        if self.tilts() {
+            return Err(Error::Invalid(
+                "the rapier reference has no compliance about the axes perpendicular to the joints \
+                 (truth.tilt_stiffness_nm_per_rad): solve with deflection = \"fixed-point\""
+                    .into(),
+            ));
+        }
         let gravity_in_base = self.chain.base.rotation.inverse() * self.gravity;
-        super::physics::PhysicsReference::new(
+        let mut reference = super::physics::PhysicsReference::new(
             &self.urdf()?,
             &self.chain.joint_names(),
             &self.perturbation.stiffness,
             gravity_in_base.into(),
             opts,
-        )
+        )?;
+        reference.set_soft_zones(&self.perturbation.soft_zone)?;
+        Ok(reference)
     }
 
     /// URDF text of the true robot in its base frame (perturbed geometry, payload folded in).
     pub fn urdf(&self) -> Result<String> {
         crate::robot::urdf::to_urdf_string(&self.chain, &self.payload)
+    }
+}
+
+/// The true inertial of every moving link: the URDF's with its mass scaled and centre of mass moved by the
+/// perturbation, plus the cable along the link (from the link's frame to the next joint, or to the flange)
+/// as a point mass at its middle.
+fn true_inertials(chain: &mut Chain, p: &Perturbation) {
+    let n = chain.dof();
+    for i in 0..n {
+        let next = if i + 1 < n {
+            chain.joints[i + 1].origin.translation.vector
+        } else {
+            chain.flange.translation.vector
+        };
+        let inertial = &mut chain.bodies[i + 1].inertial;
+        if let Some(&f) = p.link_mass_factor.get(i) {
+            inertial.mass *= f;
+            inertial.inertia *= f;
+        }
+        if let Some(o) = p.link_com_offset.get(i) {
+            inertial.com += Vector3::from(*o);
+        }
+        if p.cable_kg_per_m > 0.0 {
+            let cable = Inertial {
+                mass: p.cable_kg_per_m * next.norm(),
+                com: Point3::from(next * 0.5),
+                inertia: Matrix3::zeros(),
+            };
+            *inertial = inertial.combined(&cable);
+        }
     }
 }
