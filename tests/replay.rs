@@ -97,21 +97,11 @@ fn a_replay_measures_the_real_configurations_in_the_files_order() {
 /// pose and the reflector offset exactly, whatever they are.
 fn exact_world(yaw: f64, tilt: [f64; 2], position: [f64; 3], reflector: [f64; 3]) -> Scenario {
     let mut s = ur10_ipa();
-    let t = &mut s.truth;
-    (
-        t.frame_translation_m,
-        t.frame_rotation_rad,
-        t.joint_zero_rad,
-    ) = (0.0, 0.0, 0.0);
-    (t.base_translation_m, t.base_rotation_rad) = (0.0, 0.0);
-    t.stiffness_nm_per_rad = vec![1e12; 6];
-    (
-        t.stiffness_spread,
-        t.gear_amplitude_rad,
-        t.repeatability_rad,
-    ) = (0.0, 0.0, 0.0);
+    s.truth = calibench::truth::ErrorModel::stiff_only(vec![1e12; 6]);
     let k = &mut s.tracker;
     (k.range_sigma_m, k.range_sigma_per_m, k.angle_sigma_rad) = (0.0, 0.0, 0.0);
+    (k.range_offset_m, k.range_scale, k.vertical_index_offset_rad) = (0.0, 0.0, 0.0);
+    (k.azimuth_eccentricity_rad, k.elevation_eccentricity_rad) = ([0.0; 2], [0.0; 2]);
     (k.position_m, k.yaw_deg, k.tilt_deg) = (position, yaw, tilt);
     s.reflectors.nominal_m = vec![reflector];
     s
@@ -270,7 +260,7 @@ fn the_simulated_tables_stand_beside_the_real_ones() {
         assert_eq!(r.point_ids, s.point_ids);
         assert_eq!(
             r.extra_inputs, s.extra_inputs,
-            "the real temperature, passed through"
+            "the real temperature, passed through (the exact world has no warm-up)"
         );
         assert_eq!(
             r.measured_orientation.as_ref().map(Vec::len),
@@ -306,4 +296,75 @@ fn the_simulated_tables_stand_beside_the_real_ones() {
     let (real_mean, sim_mean) = (nominal.real_mean_mm.unwrap(), nominal.sim_mean_mm.unwrap());
     assert!(real_mean > 0.5, "real nominal {real_mean} mm");
     assert!(sim_mean < 1e-3, "the exact robot's nominal {sim_mean} mm");
+}
+
+/// The shipped UR10 scenario, fitted to the real arm (README, "A simulated UR10 fitted to the real one"), on the
+/// whole of series B, C and D: within C every method's held-out mean lies within ±25 % of the real one, and
+/// across series the constant-parameter `kinematic` transfers worse than `elastic`, as on the real arm. These are
+/// the figures; the scenario was fitted to them, so the test guards the fit against a change of the truth
+/// or the protocol that would silently undo it.
+#[test]
+fn the_fitted_ur10_errs_like_the_real_one() {
+    use calibench::app::real_data::{self, read_series};
+    use calibench::app::sim_vs_real::{compare, simulate_series};
+    use calibench::calib::method::FitContext;
+    use calibench::calib::registry::MethodKind as M;
+    use calibench::robot::dh::DhChain;
+
+    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
+    let dh = DhChain::from_chain(&chain).unwrap();
+    let ctx = FitContext::new(&chain, &dh);
+    let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
+    let real = read_series(&root().join("../shared/data/ipa-ur10"), &mapping, &chain).unwrap();
+    let (sim, _) = simulate_series(&ur10_ipa(), &real).unwrap();
+    for s in &sim {
+        assert!(
+            s.extra_inputs
+                .as_ref()
+                .is_some_and(|x| x.names.contains(&"temperature".to_string())),
+            "the simulated warm-up's temperature"
+        );
+    }
+    let methods = [
+        M::Nominal,
+        M::PaperRotxyz,
+        M::Kinematic,
+        M::Elastic,
+        M::ResidualRidge,
+        M::Hybrid,
+    ];
+    let quiet = &mut |_: &str| {};
+    let real_t = real_data::tables(&methods, &ctx, &real, None, 1, quiet).unwrap();
+    let sim_t = real_data::tables(&methods, &ctx, &sim, None, 1, quiet).unwrap();
+    let lines = compare(&methods, &real_t, &sim_t, &[]);
+    let mean = |protocol: &str, method: &str| {
+        let l = lines
+            .iter()
+            .find(|l| l.protocol == protocol && l.method == method)
+            .unwrap_or_else(|| panic!("no line {protocol} / {method}"));
+        (l.real_mean_mm.unwrap(), l.sim_mean_mm.unwrap())
+    };
+    for m in [
+        "nominal",
+        "paper-rotxyz",
+        "kinematic",
+        "elastic",
+        "residual-ridge",
+        "hybrid",
+    ] {
+        let (real, sim) = mean("within C", m);
+        assert!(
+            (sim / real - 1.0).abs() <= 0.25,
+            "within C, {m}: simulated {sim:.4} mm against real {real:.4} mm"
+        );
+    }
+    for protocol in ["C → D", "C → B"] {
+        let (real_k, sim_k) = mean(protocol, "kinematic");
+        let (real_e, sim_e) = mean(protocol, "elastic");
+        assert!(real_e < real_k, "{protocol}: the real order");
+        assert!(
+            sim_e < sim_k,
+            "{protocol}: simulated elastic {sim_e:.4} mm, kinematic {sim_k:.4} mm; real {real_e:.4}, {real_k:.4}"
+        );
+    }
 }
