@@ -23,12 +23,7 @@ use crate::world::World;
 /// Evaluation poses are approached from the campaign's posture.
 pub fn world(scenario: &Scenario) -> Result<World> {
     let mut world = World::new(scenario.load_robot()?, scenario.world_config())?;
-    let posture: Vec<f64> = scenario
-        .campaign
-        .posture_deg
-        .iter()
-        .map(|d| d.to_radians())
-        .collect();
+    let posture = scenario.campaign.posture_rad();
     world.robot.set_approach(&posture);
     Ok(world)
 }

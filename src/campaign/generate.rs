@@ -435,12 +435,7 @@ impl Generator<'_> {
     /// Every target of the region starts from it and is drawn toward it in the null space, so the whole
     /// region stays on the branch the posture chose.
     fn anchor(&self, region: &RegionConfig) -> Result<Vec<f64>> {
-        let posture: Vec<f64> = self
-            .config
-            .posture_deg
-            .iter()
-            .map(|d| d.to_radians())
-            .collect();
+        let posture = self.config.posture_rad();
         let centre = Isometry3::from_parts(
             Point3::from(region.center_m).coords.into(),
             region.nominal_rotation(),

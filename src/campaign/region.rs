@@ -200,6 +200,11 @@ impl SelectionConfig {
 }
 
 impl CampaignConfig {
+    /// The posture in radians: where a campaign starts and what its inverse kinematics is drawn toward.
+    pub fn posture_rad(&self) -> Vec<f64> {
+        self.posture_deg.iter().map(|d| d.to_radians()).collect()
+    }
+
     pub fn validate(&self) -> std::result::Result<(), String> {
         if self.posture_deg.iter().any(|v| !v.is_finite()) {
             return Err("posture_deg must be finite".into());

@@ -52,12 +52,7 @@ impl Generator<'_> {
                 v.q_cmd
             )));
         }
-        let posture: Vec<f64> = self
-            .config
-            .posture_deg
-            .iter()
-            .map(|d| d.to_radians())
-            .collect();
+        let posture = self.config.posture_rad();
         let histories = history::sequence(
             &robot.perturbation,
             &posture,

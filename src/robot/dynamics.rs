@@ -25,14 +25,7 @@ pub fn gravity_torques(
         "output length must equal the chain's dof"
     );
     gravity_pass(payload, &frames.flange, gravity, out, |i| {
-        let body = &chain.bodies[i + 1];
-        GravityJoint {
-            mass: body.inertial.mass,
-            com: frames.body[i + 1] * body.inertial.com,
-            axis: frames.axis(chain, i),
-            anchor: frames.anchor(i),
-            prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
-        }
+        GravityJoint::of(chain, frames, i)
     });
 }
 
@@ -44,6 +37,20 @@ pub struct GravityJoint {
     pub axis: Vector3<f64>,
     pub anchor: Point3<f64>,
     pub prismatic: bool,
+}
+
+impl GravityJoint {
+    /// Joint `i` of the URDF chain at `frames`, with the chain's own inertials.
+    fn of(chain: &Chain, frames: &Frames, i: usize) -> GravityJoint {
+        let body = &chain.bodies[i + 1];
+        GravityJoint {
+            mass: body.inertial.mass,
+            com: frames.body[i + 1] * body.inertial.com,
+            axis: frames.axis(chain, i),
+            anchor: frames.anchor(i),
+            prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
+        }
+    }
 }
 
 /// The backward pass behind every gravity torque here, of the URDF chain ([`gravity_torques`]) and of the DH
@@ -114,16 +121,7 @@ pub fn gravity_moments(
         gravity,
         torques,
         Some(moments),
-        |i| {
-            let body = &chain.bodies[i + 1];
-            GravityJoint {
-                mass: body.inertial.mass,
-                com: frames.body[i + 1] * body.inertial.com,
-                axis: frames.axis(chain, i),
-                anchor: frames.anchor(i),
-                prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
-            }
-        },
+        |i| GravityJoint::of(chain, frames, i),
     );
 }
 
