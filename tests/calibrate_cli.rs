@@ -5,7 +5,9 @@
 //! Campaigns come from the `campaign` binary on the shipped paper scenarios with a small point count,
 //! written to a temporary directory; both binaries run from the crate root so `robots/iiwa7.urdf` resolves.
 
-use crate::common::{assert_clean_failure, edit, files_under, read};
+use crate::common::{
+    IDEAL_ELASTIC, assert_clean_failure, edit, files_under, ideal_elastic_pose, read,
+};
 
 use std::collections::HashMap;
 use std::ffi::OsStr;
@@ -560,7 +562,14 @@ fn saved_model_applied_reproduces_the_predictions() {
 #[test]
 fn saved_nest_model_applied_reproduces_positions_and_orientations() {
     let dir = TempDir::new().unwrap();
-    let data = campaign(&dir, "pose", &small_pose(POSE_POINTS));
+    // On the ideal truth: its campaign has no temperature column, and `apply` reads joints only, so a model
+    // that regressed on the shipped scenario's temperature would be applied at the training mean instead.
+    let pose = edit(
+        &ideal_elastic_pose(),
+        "points = 875",
+        &format!("points = {POSE_POINTS}"),
+    );
+    let data = campaign(&dir, "pose", &pose);
     round_trip(&dir, &data.join("measurements.csv"), true);
 }
 
@@ -764,7 +773,9 @@ fn first_fitted_regression(model: &mut Value) -> Option<&mut Value> {
 #[test]
 fn apply_refuses_a_model_that_does_not_fit_itself() {
     let dir = TempDir::new().unwrap();
-    let data = campaign(&dir, "paper", &small_paper(40)).join("measurements.csv");
+    // The hybrid's elastic part must converge on 20 training points: only where its model matches the truth.
+    let ideal = edit(IDEAL_ELASTIC, "points = 2335", "points = 40");
+    let data = campaign(&dir, "paper", &ideal).join("measurements.csv");
     let apply = |model: &Path, name: &str| {
         let out = dir.path().join(format!("apply_{name}"));
         let output = apply_model(model, &data, &out.join("applied.csv"));

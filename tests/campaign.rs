@@ -4,7 +4,7 @@
 //! Every scenario here is the shipped paper_iiwa (or paper_iiwa_pose) with a small point count, written to a
 //! temporary directory; the binary runs from the crate root so `robots/iiwa7.urdf` resolves.
 
-use crate::common::{assert_clean_failure, edit, read};
+use crate::common::{IDEAL_ELASTIC, assert_clean_failure, edit, read};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -19,9 +19,14 @@ const PAPER_POSE: &str = include_str!("../scenarios/paper_iiwa_pose.toml");
 const IIWA_URDF: &str = include_str!("../robots/iiwa7.urdf");
 const POINTS: usize = 120;
 
-/// paper_iiwa with `points` wanted.
+/// paper_iiwa's robot, tracker and region on the truth without the error sources of issue 12
+/// (`ideal_elastic.toml`), with `points` wanted: the plain scenario the tests here switch sources on in.
 fn small_paper(points: usize) -> String {
-    edit(PAPER, "points = 2335", &format!("points = {points}"))
+    edit(
+        IDEAL_ELASTIC,
+        "points = 2335",
+        &format!("points = {points}"),
+    )
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -342,7 +347,7 @@ fn headers(path: &Path) -> Vec<String> {
         .collect()
 }
 
-fn expected_measurement_header(reflectors: usize) -> Vec<String> {
+fn expected_measurement_header(reflectors: usize, temperature: bool) -> Vec<String> {
     let mut h: Vec<String> = vec!["point_id".into(), "region".into()];
     h.extend((1..=7).map(|j| format!("iiwa_joint_{j}")));
     h.extend(
@@ -355,6 +360,9 @@ fn expected_measurement_header(reflectors: usize) -> Vec<String> {
             h.extend(["x", "y", "z"].iter().map(|a| format!("{prefix}{a}{k}")));
         }
     }
+    if temperature {
+        h.push("temperature".into());
+    }
     h
 }
 
@@ -362,10 +370,18 @@ fn expected_measurement_header(reflectors: usize) -> Vec<String> {
 fn measurements_header_is_exact_and_holds_no_truth() {
     let dir = TempDir::new().unwrap();
     let pose = edit(PAPER_POSE, "points = 875", "points = 60");
-    for (name, text, reflectors) in [("point", small_paper(POINTS), 1), ("pose", pose, 3)] {
+    // The shipped pose scenario has a warm-up (`truth.thermal`), so its rows carry their temperature.
+    for (name, text, reflectors, temperature) in [
+        ("point", small_paper(POINTS), 1, false),
+        ("pose", pose, 3, true),
+    ] {
         let out = run_ok(&dir, name, &text, None);
         let header = headers(&out.join("measurements.csv"));
-        assert_eq!(header, expected_measurement_header(reflectors), "{name}");
+        assert_eq!(
+            header,
+            expected_measurement_header(reflectors, temperature),
+            "{name}"
+        );
         assert!(
             header.iter().all(|c| !c.to_lowercase().contains("true")),
             "{name}: {header:?}"

@@ -390,7 +390,8 @@ fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
 /// (the paper's Table 2) goes into E_7's rotation. Checked against the noise-free truth.
 #[test]
 fn a_nest_campaign_fits_the_orientation() {
-    let text = std::fs::read_to_string("scenarios/paper_iiwa_pose.toml").unwrap();
+    // The truth elastic matches exactly (ideal_elastic.toml's) under paper_iiwa_pose's nest and region.
+    let text = crate::common::ideal_elastic_pose();
     let text = text.replacen("points = 875", "points = 500", 1);
     let scenario = Scenario::parse(&text, "paper_iiwa_pose (edited)").unwrap();
     let sim = calibench::app::simulate(&scenario).unwrap();

@@ -42,9 +42,15 @@ fn paper_scenario_has_the_papers_measured_error() {
 
 #[test]
 fn rapier_deflection_gives_the_same_campaign() {
+    // Every error source of the shipped scenario but the bearing tilt, which rapier cannot represent (README).
     let text = std::fs::read_to_string("scenarios/paper_iiwa_pose.toml")
         .unwrap()
         .replace("points = 875", "points = 40");
+    let tilt = text
+        .lines()
+        .find(|l| l.starts_with("tilt_stiffness_nm_per_rad"))
+        .expect("the shipped scenario has a bearing tilt");
+    let text = text.replace(tilt, "");
     let fast = Scenario::parse(&text, "fast").unwrap();
     let mut physics = fast.clone();
     physics.truth.deflection = DeflectionSolver::Rapier;

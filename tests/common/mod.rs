@@ -65,3 +65,27 @@ pub fn assert_clean_failure(output: &Output, out: &Path, needles: &[&str]) -> St
     assert!(left.is_empty(), "a failed run left files behind: {left:?}");
     line.to_string()
 }
+
+/// The truth `elastic` matches exactly (no error source of issue 12), for consistency tests.
+pub const IDEAL_ELASTIC: &str = include_str!("../../scenarios/ideal_elastic.toml");
+const PAPER_POSE: &str = include_str!("../../scenarios/paper_iiwa_pose.toml");
+
+/// `paper_iiwa_pose.toml` (its nest, payload and region) with the `[truth]` and `[tracker]` of
+/// `ideal_elastic.toml`: a full-pose campaign of a robot the `elastic` model describes exactly.
+pub fn ideal_elastic_pose() -> String {
+    let span = |text: &str| {
+        let start = text.find("\n[truth]\n").expect("a [truth] section");
+        let end = text
+            .find("\n[reflectors]\n")
+            .expect("a [reflectors] section");
+        (start, end)
+    };
+    let (a, b) = span(PAPER_POSE);
+    let (c, d) = span(IDEAL_ELASTIC);
+    format!(
+        "{}{}{}",
+        &PAPER_POSE[..a],
+        &IDEAL_ELASTIC[c..d],
+        &PAPER_POSE[b..]
+    )
+}
