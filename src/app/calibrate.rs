@@ -418,7 +418,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
             Err(e) => {
                 singular += 1;
                 row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
-                row.push(format!("no command: {e}"));
+                row.push(format!("no command: {}", e.detail()));
             }
         }
         w.write_record(&row).map_err(csv_err)?;

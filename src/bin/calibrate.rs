@@ -138,7 +138,9 @@ fn run(cli: Cli) -> Result<()> {
         })?;
         let singular = match done.without_command {
             0 => String::new(),
-            k => format!(" ({k} without a command: the inverse is undefined there, see `status`)"),
+            k => format!(
+                " ({k} without a command: singular or outside the fitted range; each says why in `status`)"
+            ),
         };
         let (n, out) = (done.configurations, done.out.display());
         println!("{n} configurations: predicted poses and corrected commands in {out}{singular}");

@@ -17,6 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::numeric;
 
 /// Search space of [`fit_all`].
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -525,10 +526,16 @@ impl Block {
             // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
             // the limit of ridge as α → 0.
             None => {
-                let svd = shifted().svd(true, true);
-                let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
-                svd.solve(&self.b, eps)
-                    .unwrap_or_else(|_| DVector::zeros(n))
+                // A Gram matrix that is not finite gives NaN coefficients and a NaN score, which the
+                // search never chooses, rather than an SVD that never returns.
+                match numeric::svd(shifted(), true, true, "ridge") {
+                    Ok(svd) => {
+                        let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
+                        svd.solve(&self.b, eps)
+                            .unwrap_or_else(|_| DVector::zeros(n))
+                    }
+                    Err(_) => DVector::from_element(n, f64::NAN),
+                }
             }
         };
         let sse = target.rr - 2.0 * w.dot(&self.cv) + w.dot(&(&self.gv * &w));
