@@ -30,6 +30,9 @@ pub enum Error {
     Invalid(String),
 }
 
+/// The longest error line a binary prints: two screen lines of message name a file, a field and a value.
+pub const MAX_LINE_CHARS: usize = 400;
+
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
@@ -40,6 +43,25 @@ impl Error {
         match self {
             Error::Invalid(message) | Error::Unreachable(message) => message.clone(),
             other => other.to_string(),
+        }
+    }
+
+    /// The error as a binary prints it: one line (line breaks of a wrapped parser message become spaces)
+    /// of at most [`MAX_LINE_CHARS`] characters, so that no input, however large, is echoed whole.
+    pub fn line(&self) -> String {
+        let text: String = self
+            .to_string()
+            .split(['\n', '\r'])
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect::<Vec<_>>()
+            .join(" ");
+        let n = text.chars().count();
+        if n <= MAX_LINE_CHARS {
+            text
+        } else {
+            let head: String = text.chars().take(MAX_LINE_CHARS).collect();
+            format!("{head}… ({n} characters in all)")
         }
     }
 

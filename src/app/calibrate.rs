@@ -14,6 +14,7 @@ use crate::calib::registry::{self, MethodKind, Save, SavedModel};
 use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Registration;
 use crate::dataset::mapping::ColumnMapping;
+use crate::dataset::range::JointRange;
 use crate::dataset::{self, Dataset, Split, TruthTable};
 use crate::error::{Error, Result};
 use crate::eval::split::SplitRule;
@@ -132,6 +133,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         .as_deref()
         .map(ColumnMapping::load)
         .transpose()?;
+    let range = JointRange::of_chain(&chain, &options.robot.display().to_string());
     let read = |path: &Path, mapping: Option<&ColumnMapping>| -> Result<Dataset> {
         let mut data = match mapping {
             Some(m) => m.read(path, &chain)?,
@@ -140,6 +142,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         if options.ignore_inputs {
             data.extra_inputs = None;
         }
+        range.check(&data.origin, &data.point_ids, &data.q)?;
         Ok(data)
     };
     let data = read(&options.data, mapping.as_ref())?;
@@ -378,6 +381,12 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         }
         None => dataset::read_joints(&options.data, &joint_names)?,
     };
+    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+    JointRange::plausible(&joint_names, &prismatic).check(
+        &options.data.display().to_string(),
+        &ids,
+        &configurations,
+    )?;
     let out = &options.out;
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
