@@ -65,6 +65,30 @@ impl Error {
         }
     }
 
+    /// A runtime error of work on the data file `origin` (registration, a fit), attributed to it:
+    /// `data FILE: DOING: detail`. An error that already names its file is kept as it is.
+    pub fn in_data(self, origin: &str, doing: &str) -> Error {
+        match self {
+            Error::Invalid(_) | Error::Unreachable(_) | Error::Physics(_) => Error::Data {
+                origin: origin.to_string(),
+                message: format!("{doing}: {}", self.detail()),
+            },
+            named => named,
+        }
+    }
+
+    /// The same for the scenario `origin`: a region that cannot be reached, a physics reference that does
+    /// not settle, are the scenario's.
+    pub fn in_scenario(self, origin: &str) -> Error {
+        match self {
+            Error::Invalid(_) | Error::Unreachable(_) | Error::Physics(_) => Error::Scenario {
+                origin: origin.to_string(),
+                message: self.to_string(),
+            },
+            named => named,
+        }
+    }
+
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),

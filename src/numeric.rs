@@ -10,6 +10,8 @@ use nalgebra::{
     SymmetricEigen, U1,
 };
 
+use levenberg_marquardt::TerminationReason;
+
 use crate::error::{Error, Result};
 
 /// Iterations allowed per singular value (or eigenvalue). The implicit-shift QR sweep needs two or three per
@@ -74,6 +76,32 @@ pub fn symmetric_eigen3(m: Matrix3<f64>, what: &str) -> Result<SymmetricEigen<f6
     }
     SymmetricEigen::try_new(m, f64::EPSILON, ITERATIONS_PER_VALUE * 3)
         .ok_or_else(|| Error::Invalid(format!("{what}: the eigen-decomposition did not converge")))
+}
+
+/// Why a Levenberg–Marquardt minimization stopped, in words (the crate's enum is not for users).
+pub fn stopped(reason: &TerminationReason) -> String {
+    match reason {
+        TerminationReason::ResidualsZero => "the residuals are zero".into(),
+        TerminationReason::Orthogonal | TerminationReason::Converged { .. } => {
+            "it converged".into()
+        }
+        TerminationReason::LostPatience => {
+            "it did not converge within its limit of evaluations".into()
+        }
+        TerminationReason::Numerical(what) | TerminationReason::User(what) => format!(
+            "a value became NaN or infinite (in the {}): the data hold a number far out of scale, or \
+             the starting guess is far off",
+            what.replace("norm", "").trim()
+        ),
+        TerminationReason::NoImprovementPossible(what) => {
+            format!("no further improvement is possible at machine precision ({what})")
+        }
+        TerminationReason::NoParameters => "there is no parameter to fit".into(),
+        TerminationReason::NoResiduals => "there is no point to fit".into(),
+        TerminationReason::WrongDimensions(what) => {
+            format!("an internal error: the {what} has the wrong dimensions")
+        }
+    }
 }
 
 #[cfg(test)]

@@ -14,6 +14,20 @@ use crate::study::StudyResult;
 use crate::study::sweep::{self, Progress};
 use crate::{measurements, output, report};
 
+/// Every file a campaign may write at the top of its directory; a rerun replaces any of them (a file the
+/// new run does not write, such as an `evaluation.json`, does not survive).
+const OUTPUTS: &[&str] = &[
+    "measurements.csv",
+    "truth.csv",
+    "campaign.json",
+    "evaluation.json",
+    "metrics.csv",
+    "outside.csv",
+    "summary.md",
+    "plots",
+    "campaign.rrd",
+];
+
 /// How to run the job.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
@@ -42,6 +56,9 @@ pub struct CampaignRun {
 /// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
 /// `evaluation.json` and the study's files, into the output directory, all or none.
 pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
+    if let Some(out) = &options.out {
+        output::check_dir(out, OUTPUTS)?;
+    }
     let started = Instant::now();
     let sim = super::simulate(&scenario)?;
     let generated = started.elapsed();
@@ -115,7 +132,7 @@ pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         }
         None => None,
     };
-    output::write_files(&out, &files)?;
+    output::write_dir(&out, &files, OUTPUTS)?;
     Ok(CampaignRun {
         scenario,
         sim,

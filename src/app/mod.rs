@@ -17,9 +17,42 @@ use crate::study::sweep::{self, Progress};
 use crate::study::{StudyConfig, StudyResult};
 use crate::world::World;
 
+/// The most worker threads `--threads` may ask for: more than the cores of any machine this runs on, and
+/// few enough that starting them cannot exhaust the system (100 000 threads hung it).
+pub const MAX_THREADS: usize = 256;
+
+/// The command line as `T`, or the process ends: with help or version printed (exit 0), or with one
+/// `error:` line (exit 1, as every other refusal of the tools; clap alone would print its usage and exit 2).
+pub fn parse_args<T: clap::Parser>() -> T {
+    use clap::error::ErrorKind;
+    match T::try_parse() {
+        Ok(args) => args,
+        Err(e) => match e.kind() {
+            ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+            _ => {
+                let text = e.to_string();
+                let first = text
+                    .lines()
+                    .map(str::trim)
+                    .find(|l| !l.is_empty())
+                    .unwrap_or("error: bad arguments");
+                let line = Error::Invalid(first.trim_start_matches("error:").trim().into()).line();
+                eprintln!(
+                    "error: {} (see --help)",
+                    line.trim_start_matches("invalid input: ")
+                );
+                std::process::exit(1)
+            }
+        },
+    }
+}
+
 /// The scenario's world: its robot loaded and checked, the true robot, tracker and mounting drawn from its seed.
 pub fn world(scenario: &Scenario) -> Result<World> {
     World::new(scenario.load_robot()?, scenario.world_config())
+        .map_err(|e| e.in_scenario(&scenario.origin))
 }
 
 /// The scenario's world and its campaign over every region.
@@ -39,7 +72,8 @@ pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
             seed: world.seed(),
             selector: selector.as_ref().map(|s| s as _),
         }
-        .run(&scenario.regions)?
+        .run(&scenario.regions)
+        .map_err(|e| e.in_scenario(&scenario.origin))?
     };
     Ok(Simulation { world, campaign })
 }

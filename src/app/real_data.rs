@@ -104,6 +104,7 @@ impl Options {
 /// file's path.
 pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     options.validate()?;
+    output::check_dir(&options.out, &["real_data.json"])?;
     let chain = urdf::load_file(&options.robot, None)?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = ColumnMapping::load(&options.mapping)?;

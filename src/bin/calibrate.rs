@@ -26,7 +26,8 @@ use calibench::{Error, Result};
 #[command(
     version,
     about = "Calibrate a robot from laser-tracker measurements",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    allow_negative_numbers = true
 )]
 struct Cli {
     #[command(subcommand)]
@@ -118,7 +119,7 @@ struct ApplyArgs {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    match run(calibench::app::parse_args::<Cli>()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", e.line());

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+use calibench::app::MAX_THREADS;
 use calibench::app::campaign::{self, CampaignRun, Options};
 use calibench::eval::Stats;
 use calibench::scenario::Scenario;
@@ -19,7 +20,8 @@ const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
 #[derive(Parser, Debug)]
 #[command(
     version,
-    about = "Simulate a laser-tracker calibration campaign with known true robot errors"
+    about = "Simulate a laser-tracker calibration campaign with known true robot errors",
+    allow_negative_numbers = true
 )]
 struct Args {
     /// Scenario file (TOML); the embedded default study (`scenarios/default.toml`) when omitted.
@@ -38,7 +40,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args = calibench::app::parse_args::<Args>();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -50,8 +52,10 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     if let Some(n) = args.threads {
-        if n == 0 {
-            return Err(Error::Invalid("--threads must be at least 1".into()));
+        if !(1..=MAX_THREADS).contains(&n) {
+            return Err(Error::Invalid(format!(
+                "--threads {n}: between 1 and {MAX_THREADS}"
+            )));
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)

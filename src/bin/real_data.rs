@@ -23,7 +23,10 @@ use clap::Parser;
 use calibench::app::real_data::{self, Options};
 
 #[derive(Parser, Debug)]
-#[command(about = "Every calibration method on the real UR10 tracker data: the README's tables")]
+#[command(
+    about = "Every calibration method on the real UR10 tracker data: the README's tables",
+    allow_negative_numbers = true
+)]
 struct Cli {
     /// The data set's directory (Series_B, Series_C, Series_D).
     #[arg(long, default_value = "../shared/data/ipa-ur10")]
@@ -50,7 +53,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = calibench::app::parse_args::<Cli>();
     let options = Options {
         data_dir: cli.data_dir,
         mapping: cli.mapping,

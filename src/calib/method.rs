@@ -276,8 +276,8 @@ pub trait Fitted: Any + Send + Sync {
             let step = numeric::svd(j.rows(0, rows).into_owned(), true, true, "inverse")?
                 .solve(&rhs, 1e-12)
                 .map_err(|e| Error::Invalid(format!("inverse: singular Jacobian ({e})")))?;
-            // The calibrated model differs from the nominal one by millimetres, so a step of a tenth of a
-            // radian means the nominal Jacobian is (nearly) singular here and Gauss–Newton is diverging.
+            // A step larger than any correction means the nominal Jacobian is (nearly) singular here and
+            // Gauss–Newton is diverging.
             if !(step.norm() <= MAX_INVERSE_STEP_RAD) {
                 return Err(Error::Invalid(format!(
                     "inverse: the configuration is singular or nearly so (a correction step of {:.1e} \
@@ -315,9 +315,11 @@ pub const MAX_CORRECTION_M: f64 = 0.05;
 /// pass, a rotation of tens of degrees is a polynomial extrapolating.
 pub const MAX_CORRECTION_RAD: f64 = 0.5;
 
-/// The largest joint correction (rad, norm over the joints) one step of [`Fitted::command_for`] may take: a
-/// tenth of a radian moves a point a metre away by 100 mm, far more than any calibration corrects.
-pub const MAX_INVERSE_STEP_RAD: f64 = 0.1;
+/// The largest joint correction (rad, norm over the joints) one step of [`Fitted::command_for`] may take.
+/// Away from a singularity a step is about the correction itself: under 0.05 m / reach plus the
+/// [`MAX_CORRECTION_RAD`] of orientation (0.2 rad for the tilted nest of `paper_iiwa_pose`). At a straight
+/// arm the steps of a diverging Gauss–Newton are hundreds of radians.
+pub const MAX_INVERSE_STEP_RAD: f64 = 1.0;
 
 /// Geometric Jacobian of a point fixed to the flange (rows 0–2) and of the flange rotation (rows 3–5), for the
 /// nominal DH chain.

@@ -381,8 +381,22 @@ impl Design {
         let mut f_train = raw(x_train);
         let mut f_val = raw(x_val);
         if f_train.iter().chain(f_val.iter()).any(|v| !v.is_finite()) {
+            // The cause is an input far from the others (an outlier, a wrong unit), not the degree.
+            let (mut worst, mut at) = (0.0_f64, 0);
+            for x in [x_train, x_val] {
+                for r in 0..x.nrows() {
+                    for k in 0..c {
+                        let z = ((x[(r, k)] - input_mean[k]) / input_scale[k]).abs();
+                        if !(z <= worst) {
+                            (worst, at) = (z, k);
+                        }
+                    }
+                }
+            }
             return Err(Error::Invalid(format!(
-                "regression: polynomial features of degree {max_degree} overflow; lower max_degree"
+                "regression: polynomial features of degree {max_degree} overflow: a value of input {} lies \
+                 {worst:.1e} standard deviations from its training mean (an outlier or a wrong unit in the data)",
+                at + 1
             )));
         }
         let mut feature_mean = Vec::with_capacity(p);

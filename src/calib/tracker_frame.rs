@@ -369,8 +369,8 @@ fn fit_frame(
         .minimize(problem);
     if !report.termination.was_successful() {
         return Err(Error::Invalid(format!(
-            "tracker frame: the least-squares refinement did not converge ({:?})",
-            report.termination
+            "tracker frame: the least-squares refinement failed: {}",
+            numeric::stopped(&report.termination)
         )));
     }
     let (transform, mounting) = problem.unpack();
