@@ -4,6 +4,7 @@
 
 mod common;
 
+mod bad_inputs;
 mod calibrate;
 mod calibrate_cli;
 mod campaign;
@@ -17,6 +18,7 @@ mod recording;
 mod report;
 mod residual;
 mod robot;
+mod robustness;
 mod study;
 mod study_cli;
 mod tracker;

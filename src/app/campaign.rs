@@ -36,6 +36,8 @@ pub struct Options {
     /// Keep the wall-clock fit times in the study's `fit_ms` column (otherwise NaN, so that the files are
     /// byte-identical for the same scenario whatever the machine and thread count).
     pub timings: bool,
+    /// Run a study above the time budget ([`super::STUDY_BUDGET_S`]).
+    pub long: bool,
 }
 
 /// What the job did, for the binary to print.
@@ -59,6 +61,7 @@ pub fn run(scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     if let Some(out) = &options.out {
         output::check_dir(out, OUTPUTS)?;
     }
+    super::check_study_budget(&scenario, rayon::current_num_threads(), options.long)?;
     let started = Instant::now();
     let sim = super::simulate(&scenario)?;
     let generated = started.elapsed();

@@ -49,6 +49,32 @@ pub fn parse_args<T: clap::Parser>() -> T {
     }
 }
 
+/// The longest study `campaign` runs without `--long`: one hour by the up-front estimate
+/// ([`StudyConfig::estimated_core_seconds`] over the cores). A study of two million runs was accepted and
+/// would have run for weeks.
+pub const STUDY_BUDGET_S: f64 = 3600.0;
+
+/// Refuses a study estimated above [`STUDY_BUDGET_S`] on `threads` workers, unless `long`.
+pub fn check_study_budget(scenario: &Scenario, threads: usize, long: bool) -> Result<()> {
+    let Some(study) = &scenario.study else {
+        return Ok(());
+    };
+    let seconds = study.estimated_core_seconds(scenario.regions.len()) / threads.max(1) as f64;
+    if long || seconds <= STUDY_BUDGET_S {
+        return Ok(());
+    }
+    Err(Error::Scenario {
+        origin: scenario.origin.clone(),
+        message: format!(
+            "[study]: {} runs, an estimated {:.1} hours on {threads} threads, above the budget of {:.0} hour \
+             (fewer sizes, seeds, layouts or methods shorten it); pass --long to run it anyway",
+            study.runs(scenario.regions.len()),
+            seconds / 3600.0,
+            STUDY_BUDGET_S / 3600.0
+        ),
+    })
+}
+
 /// The scenario's world: its robot loaded and checked, the true robot, tracker and mounting drawn from its seed.
 pub fn world(scenario: &Scenario) -> Result<World> {
     World::new(scenario.load_robot()?, scenario.world_config())

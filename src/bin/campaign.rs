@@ -37,6 +37,9 @@ struct Args {
     /// benchmarks (`cargo bench`) measure fit times properly.
     #[arg(long)]
     timings: bool,
+    /// Run a study whose estimated time exceeds the budget of one hour.
+    #[arg(long)]
+    long: bool,
 }
 
 fn main() -> ExitCode {
@@ -69,6 +72,7 @@ fn run(args: &Args) -> Result<()> {
     let options = Options {
         out: args.out.clone(),
         timings: args.timings,
+        long: args.long,
     };
     let done = campaign::run(scenario, &options)?;
     print(&done);
