@@ -139,9 +139,7 @@ fn run(cli: Cli) -> Result<()> {
         })?;
         let singular = match done.without_command {
             0 => String::new(),
-            k => format!(
-                " ({k} without a command: singular or outside the fitted range; each says why in `status`)"
-            ),
+            k => format!(" ({k} without a command: singular or extrapolated, see `status`)"),
         };
         let (n, out) = (done.configurations, done.out.display());
         println!("{n} configurations: predicted poses and corrected commands in {out}{singular}");

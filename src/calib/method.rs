@@ -278,7 +278,7 @@ pub trait Fitted: Any + Send + Sync {
                 .map_err(|e| Error::Invalid(format!("inverse: singular Jacobian ({e})")))?;
             // A step larger than any correction means the nominal Jacobian is (nearly) singular here and
             // Gauss–Newton is diverging.
-            if !(step.norm() <= MAX_INVERSE_STEP_RAD) {
+            if step.norm().is_nan() || step.norm() > MAX_INVERSE_STEP_RAD {
                 return Err(Error::Invalid(format!(
                     "inverse: the configuration is singular or nearly so (a correction step of {:.1e} \
                      rad, the largest sensible is {MAX_INVERSE_STEP_RAD})",

@@ -387,7 +387,7 @@ impl Design {
                 for r in 0..x.nrows() {
                     for k in 0..c {
                         let z = ((x[(r, k)] - input_mean[k]) / input_scale[k]).abs();
-                        if !(z <= worst) {
+                        if z.is_nan() || z > worst {
                             (worst, at) = (z, k);
                         }
                     }
