@@ -30,6 +30,9 @@ pub enum Error {
     Invalid(String),
 }
 
+/// The longest error line a binary prints: two screen lines of message name a file, a field and a value.
+pub const MAX_LINE_CHARS: usize = 400;
+
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
@@ -40,6 +43,49 @@ impl Error {
         match self {
             Error::Invalid(message) | Error::Unreachable(message) => message.clone(),
             other => other.to_string(),
+        }
+    }
+
+    /// The error as a binary prints it: one line (line breaks of a wrapped parser message become spaces)
+    /// of at most [`MAX_LINE_CHARS`] characters, so that no input, however large, is echoed whole.
+    pub fn line(&self) -> String {
+        let text: String = self
+            .to_string()
+            .split(['\n', '\r'])
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect::<Vec<_>>()
+            .join(" ");
+        let n = text.chars().count();
+        if n <= MAX_LINE_CHARS {
+            text
+        } else {
+            let head: String = text.chars().take(MAX_LINE_CHARS).collect();
+            format!("{head}… ({n} characters in all)")
+        }
+    }
+
+    /// A runtime error of work on the data file `origin` (registration, a fit), attributed to it:
+    /// `data FILE: DOING: detail`. An error that already names its file is kept as it is.
+    pub fn in_data(self, origin: &str, doing: &str) -> Error {
+        match self {
+            Error::Invalid(_) | Error::Unreachable(_) | Error::Physics(_) => Error::Data {
+                origin: origin.to_string(),
+                message: format!("{doing}: {}", self.detail()),
+            },
+            named => named,
+        }
+    }
+
+    /// The same for the scenario `origin`: a region that cannot be reached, a physics reference that does
+    /// not settle, are the scenario's.
+    pub fn in_scenario(self, origin: &str) -> Error {
+        match self {
+            Error::Invalid(_) | Error::Unreachable(_) | Error::Physics(_) => Error::Scenario {
+                origin: origin.to_string(),
+                message: self.to_string(),
+            },
+            named => named,
         }
     }
 

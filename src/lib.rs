@@ -3,7 +3,7 @@
 //! Modules follow the pipeline of a calibration campaign (the README's module table says what each holds).
 //! Each imports only modules written before it in this order (the `module_order` test checks it):
 //!
-//! - `error`, `rng`, `output`: serve every stage;
+//! - `error`, `output`, `rng`, `numeric` (decompositions that refuse non-finite input): serve every stage;
 //! - `robot` (the nominal chain: URDF, DH form, kinematics, IK, collisions) → `truth` (the true robot) →
 //!   `tracker` (instrument and reflectors) → `world` (the simulated world built once: nominal and true robot,
 //!   tracker, mounting, seed) → `campaign` (regions, layouts, feasibility, the simulated measurement) →
@@ -17,6 +17,7 @@
 pub mod error;
 pub mod output;
 pub mod rng;
+pub mod numeric;
 
 pub mod robot;
 pub mod truth;

@@ -4,6 +4,7 @@
 
 mod common;
 
+mod bad_inputs;
 mod calibrate;
 mod calibrate_cli;
 mod campaign;
@@ -18,6 +19,7 @@ mod replay;
 mod report;
 mod residual;
 mod robot;
+mod robustness;
 mod study;
 mod study_cli;
 mod tracker;

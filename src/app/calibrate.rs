@@ -14,6 +14,7 @@ use crate::calib::registry::{self, MethodKind, Save, SavedModel};
 use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Registration;
 use crate::dataset::mapping::ColumnMapping;
+use crate::dataset::range::JointRange;
 use crate::dataset::{self, Dataset, Split, TruthTable};
 use crate::error::{Error, Result};
 use crate::eval::split::SplitRule;
@@ -122,9 +123,13 @@ pub struct FitOutcome {
     pub out: PathBuf,
 }
 
+/// The files a fit writes.
+const FIT_OUTPUTS: [&str; 3] = ["report.json", "model.json", "predictions.csv"];
+
 /// Fits `options.method` and writes `report.json`, `model.json` and `predictions.csv` into `options.out`,
 /// all or none.
 pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
+    output::check_dir(&options.out, &FIT_OUTPUTS)?;
     let chain = urdf::load_file(&options.robot, options.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = options
@@ -132,6 +137,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         .as_deref()
         .map(ColumnMapping::load)
         .transpose()?;
+    let range = JointRange::of_chain(&chain, &options.robot.display().to_string());
     let read = |path: &Path, mapping: Option<&ColumnMapping>| -> Result<Dataset> {
         let mut data = match mapping {
             Some(m) => m.read(path, &chain)?,
@@ -140,6 +146,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         if options.ignore_inputs {
             data.extra_inputs = None;
         }
+        range.check(&data.origin, &data.point_ids, &data.q)?;
         Ok(data)
     };
     let data = read(&options.data, mapping.as_ref())?;
@@ -177,19 +184,25 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         payload: options.payload,
         regression: options.regression.clone(),
     };
-    let model = registry::fit(options.method, &ctx, train, val)?;
+    let fitting = format!("fitting {}", options.method.info());
+    let model = registry::fit(options.method, &ctx, train, val)
+        .map_err(|e| e.in_data(&data.origin, &fitting))?;
     let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
     let (obs_test, test_errors, test_registration) = match &test_file {
         None => {
-            let obs = model.registration().observe(test)?;
+            let obs = model
+                .registration()
+                .observe(test)
+                .map_err(|e| e.in_data(&data.origin, "the test split"))?;
             let e = BeforeAfter::of(model, &obs);
             (obs, e, None)
         }
         Some(t) => {
             let mode = options.test_registration;
-            let after = transfer::evaluate(model, t, mode)?;
+            let after = transfer::evaluate(model, t, mode)
+                .map_err(|e| e.in_data(&t.origin, "registering the test campaign"))?;
             // "Before": the nominal kinematics, registered on the test campaign the same way.
             let nominal = match options.method {
                 MethodKind::Nominal => None,
@@ -241,13 +254,14 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     };
 
     let predictions = predictions_csv(model, &data, &parts.labels)?;
-    output::write_files(
+    output::write_dir(
         &options.out,
         &[
             ("report.json", to_json(&to_value(&report)?)?),
             ("model.json", to_json(&model.save()?)?),
             ("predictions.csv", predictions),
         ],
+        &[],
     )?;
 
     let what = match &report.test_registration {
@@ -378,6 +392,12 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         }
         None => dataset::read_joints(&options.data, &joint_names)?,
     };
+    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+    JointRange::plausible(&joint_names, &prismatic).check(
+        &options.data.display().to_string(),
+        &ids,
+        &configurations,
+    )?;
     let out = &options.out;
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
@@ -418,7 +438,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
             Err(e) => {
                 singular += 1;
                 row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
-                row.push(format!("no command: {e}"));
+                row.push(format!("no command: {}", e.detail()));
             }
         }
         w.write_record(&row).map_err(csv_err)?;
@@ -426,25 +446,10 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     let bytes = w
         .into_inner()
         .map_err(|e| Error::Invalid(format!("{}: {e}", out.display())))?;
-    let (dir, name) = split_path(out)?;
-    output::write_files(dir, &[(name, bytes)])?;
+    output::write_file(out, &bytes)?;
     Ok(ApplyOutcome {
         configurations: ids.len(),
         without_command: singular,
         out: out.clone(),
     })
-}
-
-/// A file path's directory (`.` when it has none) and name.
-fn split_path(path: &Path) -> Result<(&Path, &str)> {
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .ok_or_else(|| Error::Invalid(format!("--out {} is not a file name", path.display())))?;
-    Ok((
-        path.parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new(".")),
-        name,
-    ))
 }

@@ -15,6 +15,20 @@ use crate::study::StudyResult;
 use crate::study::sweep::{self, Progress};
 use crate::{measurements, output, report};
 
+/// Every file a campaign may write at the top of its directory; a rerun replaces any of them (a file the
+/// new run does not write, such as an `evaluation.json`, does not survive).
+const OUTPUTS: &[&str] = &[
+    "measurements.csv",
+    "truth.csv",
+    "campaign.json",
+    "evaluation.json",
+    "metrics.csv",
+    "outside.csv",
+    "summary.md",
+    "plots",
+    "campaign.rrd",
+];
+
 /// How to run the job.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
@@ -26,6 +40,8 @@ pub struct Options {
     /// Replay this real campaign instead of the scenario's regions (its `[evaluation]` and `[study]` are not
     /// run then).
     pub replay: Option<ReplaySource>,
+    /// Run a study above the time budget ([`super::STUDY_BUDGET_S`]).
+    pub long: bool,
 }
 
 /// A real campaign to replay: the file, and the column mapping it is read through (a `measurements.csv`
@@ -56,6 +72,10 @@ pub struct CampaignRun {
 /// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
 /// `evaluation.json` and the study's files, into the output directory, all or none.
 pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
+    if let Some(out) = &options.out {
+        output::check_dir(out, OUTPUTS)?;
+    }
+    super::check_study_budget(&scenario, rayon::current_num_threads(), options.long)?;
     let started = Instant::now();
     let (sim, replay) = match &options.replay {
         None => (super::simulate(&scenario)?, None),
@@ -158,7 +178,7 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         }
         None => None,
     };
-    output::write_files(&out, &files)?;
+    output::write_dir(&out, &files, OUTPUTS)?;
     Ok(CampaignRun {
         scenario,
         sim,

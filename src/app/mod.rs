@@ -19,12 +19,70 @@ use crate::study::sweep::{self, Progress};
 use crate::study::{StudyConfig, StudyResult};
 use crate::world::World;
 
+/// The most worker threads `--threads` may ask for: more than the cores of any machine this runs on, and
+/// few enough that starting them cannot exhaust the system (100 000 threads hung it).
+pub const MAX_THREADS: usize = 256;
+
+/// The command line as `T`, or the process ends: with help or version printed (exit 0), or with one
+/// `error:` line (exit 1, as every other refusal of the tools; clap alone would print its usage and exit 2).
+pub fn parse_args<T: clap::Parser>() -> T {
+    use clap::error::ErrorKind;
+    match T::try_parse() {
+        Ok(args) => args,
+        Err(e) => match e.kind() {
+            ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+            _ => {
+                let text = e.to_string();
+                let first = text
+                    .lines()
+                    .map(str::trim)
+                    .find(|l| !l.is_empty())
+                    .unwrap_or("error: bad arguments");
+                let line = Error::Invalid(first.trim_start_matches("error:").trim().into()).line();
+                eprintln!(
+                    "error: {} (see --help)",
+                    line.trim_start_matches("invalid input: ")
+                );
+                std::process::exit(1)
+            }
+        },
+    }
+}
+
+/// The longest study `campaign` runs without `--long`: one hour by the up-front estimate
+/// ([`StudyConfig::estimated_core_seconds`] over the cores). A study of two million runs was accepted and
+/// would have run for weeks.
+pub const STUDY_BUDGET_S: f64 = 3600.0;
+
+/// Refuses a study estimated above [`STUDY_BUDGET_S`] on `threads` workers, unless `long`.
+pub fn check_study_budget(scenario: &Scenario, threads: usize, long: bool) -> Result<()> {
+    let Some(study) = &scenario.study else {
+        return Ok(());
+    };
+    let seconds = study.estimated_core_seconds(scenario.regions.len()) / threads.max(1) as f64;
+    if long || seconds <= STUDY_BUDGET_S {
+        return Ok(());
+    }
+    Err(Error::Scenario {
+        origin: scenario.origin.clone(),
+        message: format!(
+            "[study]: {} runs, an estimated {:.1} hours on {threads} threads, above the budget of {:.0} hour \
+             (fewer sizes, seeds, layouts or methods shorten it); pass --long to run it anyway",
+            study.runs(scenario.regions.len()),
+            seconds / 3600.0,
+            STUDY_BUDGET_S / 3600.0
+        ),
+    })
+}
+
 /// The scenario's world: its robot loaded and checked, the true robot, tracker and mounting drawn from its seed.
 /// Evaluation poses are approached from the campaign's posture.
 pub fn world(scenario: &Scenario) -> Result<World> {
-    let mut world = World::new(scenario.load_robot()?, scenario.world_config())?;
-    let posture = scenario.campaign.posture_rad();
-    world.robot.set_approach(&posture);
+    let mut world = World::new(scenario.load_robot()?, scenario.world_config())
+        .map_err(|e| e.in_scenario(&scenario.origin))?;
+    world.robot.set_approach(&scenario.campaign.posture_rad());
     Ok(world)
 }
 
@@ -45,7 +103,8 @@ pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
             seed: world.seed(),
             selector: selector.as_ref().map(|s| s as _),
         }
-        .run(&scenario.regions)?
+        .run(&scenario.regions)
+        .map_err(|e| e.in_scenario(&scenario.origin))?
     };
     Ok(Simulation { world, campaign })
 }

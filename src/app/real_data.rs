@@ -21,6 +21,7 @@ use crate::calib::registry::MethodKind;
 use crate::calib::regression::RegressionOptions;
 use crate::dataset::Dataset;
 use crate::dataset::mapping::ColumnMapping;
+use crate::dataset::range::JointRange;
 use crate::error::{Error, Result};
 use crate::eval::protocol::{self, CurvePoint, METHODS, Row, Table, TestSet};
 use crate::eval::split::SplitRule;
@@ -61,10 +62,50 @@ struct Report {
     curve: Vec<CurvePoint>,
 }
 
+/// Draws per learning-curve size: each draw fits every method once (about a second on this machine), so
+/// a hundred draws of seven sizes already take the better part of an hour.
+pub const MAX_DRAWS: usize = 100;
+/// Learning-curve sizes: at most this many, each at most [`MAX_CURVE_POINTS`] (the series hold a few
+/// thousand points; the pool is checked again against the data).
+pub const MAX_SIZES: usize = 50;
+pub const MAX_CURVE_POINTS: usize = 100_000;
+
+impl Options {
+    /// The counts, before any file is read: a curve of no draws would print a table of nothing.
+    pub fn validate(&self) -> Result<()> {
+        let Some(sizes) = &self.sizes else {
+            return Ok(());
+        };
+        if !(1..=MAX_DRAWS).contains(&self.draws) {
+            return Err(Error::Invalid(format!(
+                "--draws {}: between 1 and {MAX_DRAWS} draws per learning-curve size (or --no-curve)",
+                self.draws
+            )));
+        }
+        if sizes.is_empty() || sizes.len() > MAX_SIZES {
+            return Err(Error::Invalid(format!(
+                "--sizes: between 1 and {MAX_SIZES} learning-curve sizes, got {}",
+                sizes.len()
+            )));
+        }
+        if let Some(n) = sizes
+            .iter()
+            .find(|&&n| !(3..=MAX_CURVE_POINTS).contains(&n))
+        {
+            return Err(Error::Invalid(format!(
+                "--sizes: {n} points: a learning-curve size is between 3 and {MAX_CURVE_POINTS}"
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Reads the three series of `options.data_dir` through the mapping, runs the protocol, hands each table to
 /// `show` as Markdown as soon as it is ready, and writes `real_data.json` into `options.out`. Returns the
 /// file's path.
 pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
+    options.validate()?;
+    output::check_dir(&options.out, &["real_data.json"])?;
     let chain = urdf::load_file(&options.robot, None)?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = ColumnMapping::load(&options.mapping)?;
@@ -167,7 +208,15 @@ pub fn tables(
 pub fn read_series(dir: &Path, mapping: &ColumnMapping, chain: &Chain) -> Result<Vec<Dataset>> {
     SERIES
         .iter()
-        .map(|(_, file)| mapping.read(&dir.join(file), chain))
+        .map(|(_, file)| {
+            let data = mapping.read(&dir.join(file), chain)?;
+            JointRange::of_chain(chain, "the robot's URDF").check(
+                &data.origin,
+                &data.point_ids,
+                &data.q,
+            )?;
+            Ok(data)
+        })
         .collect()
 }
 

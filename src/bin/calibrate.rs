@@ -26,7 +26,8 @@ use calibench::{Error, Result};
 #[command(
     version,
     about = "Calibrate a robot from laser-tracker measurements",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    allow_negative_numbers = true
 )]
 struct Cli {
     #[command(subcommand)]
@@ -118,10 +119,10 @@ struct ApplyArgs {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    match run(calibench::app::parse_args::<Cli>()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", e.line());
             ExitCode::FAILURE
         }
     }
@@ -138,7 +139,7 @@ fn run(cli: Cli) -> Result<()> {
         })?;
         let singular = match done.without_command {
             0 => String::new(),
-            k => format!(" ({k} without a command: the inverse is undefined there, see `status`)"),
+            k => format!(" ({k} without a command: singular or extrapolated, see `status`)"),
         };
         let (n, out) = (done.configurations, done.out.display());
         println!("{n} configurations: predicted poses and corrected commands in {out}{singular}");

@@ -10,6 +10,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+use calibench::app::MAX_THREADS;
 use calibench::app::campaign::{self, CampaignRun, Options, ReplaySource};
 use calibench::eval::Stats;
 use calibench::scenario::Scenario;
@@ -21,7 +22,8 @@ const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
 #[derive(Parser, Debug)]
 #[command(
     version,
-    about = "Simulate a laser-tracker calibration campaign with known true robot errors"
+    about = "Simulate a laser-tracker calibration campaign with known true robot errors",
+    allow_negative_numbers = true
 )]
 struct Args {
     /// Scenario file (TOML); the embedded default study (`scenarios/default.toml`) when omitted.
@@ -47,14 +49,17 @@ struct Args {
     /// read as a `measurements.csv`.
     #[arg(long, value_name = "MAP", requires = "replay")]
     mapping: Option<PathBuf>,
+    /// Run a study whose estimated time exceeds the budget of one hour.
+    #[arg(long)]
+    long: bool,
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args = calibench::app::parse_args::<Args>();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", e.line());
             ExitCode::FAILURE
         }
     }
@@ -62,8 +67,10 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<()> {
     if let Some(n) = args.threads {
-        if n == 0 {
-            return Err(Error::Invalid("--threads must be at least 1".into()));
+        if !(1..=MAX_THREADS).contains(&n) {
+            return Err(Error::Invalid(format!(
+                "--threads {n}: between 1 and {MAX_THREADS}"
+            )));
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -81,6 +88,7 @@ fn run(args: &Args) -> Result<()> {
             file,
             mapping: args.mapping.clone(),
         }),
+        long: args.long,
     };
     let done = campaign::run(scenario, &options)?;
     print(&done);

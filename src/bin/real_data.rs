@@ -28,7 +28,10 @@ use calibench::app::real_data::{self, Options};
 use calibench::app::sim_vs_real;
 
 #[derive(Parser, Debug)]
-#[command(about = "Every calibration method on the real UR10 tracker data: the README's tables")]
+#[command(
+    about = "Every calibration method on the real UR10 tracker data: the README's tables",
+    allow_negative_numbers = true
+)]
 struct Cli {
     /// The data set's directory (Series_B, Series_C, Series_D).
     #[arg(long, default_value = "../shared/data/ipa-ur10")]
@@ -58,7 +61,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = calibench::app::parse_args::<Cli>();
     let options = Options {
         data_dir: cli.data_dir,
         mapping: cli.mapping,
@@ -78,7 +81,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", e.line());
             ExitCode::FAILURE
         }
     }

@@ -16,6 +16,7 @@ use super::error_model::ErrorModelKind;
 use super::regression::RegressionOptions;
 use super::tracker_frame::{Observation, Registration};
 use crate::error::{Error, Result};
+use crate::numeric;
 use crate::robot::dh::DhChain;
 use crate::robot::kinematics::joint_column;
 use crate::robot::plausible;
@@ -236,11 +237,33 @@ pub trait Fitted: Any + Send + Sync {
         let mut err = f64::INFINITY;
         for _ in 0..20 {
             let pred = self.predict(&q);
+            if !numeric::all_finite(
+                pred.position
+                    .coords
+                    .iter()
+                    .chain(pred.orientation.coords.iter()),
+            ) {
+                return Err(Error::Invalid(format!(
+                    "the model's prediction is not a finite number at joints {}: the configuration is far \
+                     outside what the model was fitted on",
+                    short_list(&q)
+                )));
+            }
             let dp = target - pred.position;
             let dr = rotation.map_or(Vector3::zeros(), |r| {
                 (r * pred.orientation.inverse()).scaled_axis()
             });
             err = dp.norm();
+            if err > MAX_CORRECTION_M || dr.norm() > MAX_CORRECTION_RAD {
+                return Err(Error::Invalid(format!(
+                    "the model differs from the nominal robot here by {:.0} mm and {:.2} rad (more than {:.0} mm \
+                     or {MAX_CORRECTION_RAD} rad): it is extrapolating, the configuration is outside what it \
+                     was fitted on",
+                    err * 1e3,
+                    dr.norm(),
+                    MAX_CORRECTION_M * 1e3
+                )));
+            }
             if err < 1e-10 && dr.norm() < 1e-10 {
                 return Ok((q, err));
             }
@@ -250,12 +273,18 @@ pub trait Fitted: Any + Send + Sync {
                 rhs.fixed_rows_mut::<3>(3).copy_from(&dr);
             }
             let j = nominal_jacobian(self.dh(), &self.registration().frame.mounting, &q);
-            let step = j
-                .rows(0, rows)
-                .into_owned()
-                .svd(true, true)
+            let step = numeric::svd(j.rows(0, rows).into_owned(), true, true, "inverse")?
                 .solve(&rhs, 1e-12)
                 .map_err(|e| Error::Invalid(format!("inverse: singular Jacobian ({e})")))?;
+            // A step larger than any correction means the nominal Jacobian is (nearly) singular here and
+            // Gauss–Newton is diverging.
+            if step.norm().is_nan() || step.norm() > MAX_INVERSE_STEP_RAD {
+                return Err(Error::Invalid(format!(
+                    "inverse: the configuration is singular or nearly so (a correction step of {:.1e} \
+                     rad, the largest sensible is {MAX_INVERSE_STEP_RAD})",
+                    step.norm()
+                )));
+            }
             for (qi, s) in q.iter_mut().zip(step.iter()) {
                 *qi += s;
             }
@@ -276,6 +305,22 @@ pub trait Fitted: Any + Send + Sync {
     }
 }
 
+/// The largest distance (m) between the calibrated and the nominal model that [`Fitted::command_for`]
+/// corrects: real robots are off by millimetres (a few tenths on the iiwa, up to ~10 mm on a large arm with
+/// a bad zero); a model that differs by 50 mm is extrapolating, and its command would be nonsense.
+pub const MAX_CORRECTION_M: f64 = 0.05;
+
+/// The largest rotation (rad) between the calibrated and the nominal flange that [`Fitted::command_for`]
+/// corrects: a model that absorbs a nest's unknown mounting rotation (0.22 rad in `paper_iiwa_pose`) must
+/// pass, a rotation of tens of degrees is a polynomial extrapolating.
+pub const MAX_CORRECTION_RAD: f64 = 0.5;
+
+/// The largest joint correction (rad, norm over the joints) one step of [`Fitted::command_for`] may take.
+/// Away from a singularity a step is about the correction itself: under 0.05 m / reach plus the
+/// [`MAX_CORRECTION_RAD`] of orientation (0.2 rad for the tilted nest of `paper_iiwa_pose`). At a straight
+/// arm the steps of a diverging Gauss–Newton are hundreds of radians.
+pub const MAX_INVERSE_STEP_RAD: f64 = 1.0;
+
 /// Geometric Jacobian of a point fixed to the flange (rows 0–2) and of the flange rotation (rows 3–5), for the
 /// nominal DH chain.
 pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) -> DMatrix<f64> {
@@ -294,4 +339,13 @@ pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) 
         j.fixed_view_mut::<3, 1>(3, c).copy_from(&ang);
     }
     j
+}
+
+/// Numbers for a message: at most four, each to four significant digits (a huge one stays short).
+fn short_list(values: &[f64]) -> String {
+    let mut parts: Vec<String> = values.iter().take(4).map(|v| format!("{v:.4e}")).collect();
+    if values.len() > 4 {
+        parts.push("…".into());
+    }
+    format!("[{}]", parts.join(", "))
 }

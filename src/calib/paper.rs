@@ -23,6 +23,7 @@ use super::regression::{RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::numeric;
 use crate::robot::plausible;
 
 /// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
@@ -435,8 +436,16 @@ impl PaperModel {
     }
 }
 
+/// A non-finite Jacobian or deviation (a configuration far outside the robot's range) gives NaN parameters,
+/// which the regression after it refuses, rather than an SVD that never returns.
 fn min_norm(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
-    let svd = j.svd(true, true);
+    let cols = j.ncols();
+    if !numeric::all_finite(rhs.iter()) {
+        return vec![f64::NAN; cols];
+    }
+    let Ok(svd) = numeric::svd(j, true, true, "eq. 13") else {
+        return vec![f64::NAN; cols];
+    };
     let tol = svd.singular_values.max() * PINV_REL_EPS;
     svd.solve(&rhs, tol)
         .map(|x| x.iter().copied().collect())

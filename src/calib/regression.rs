@@ -17,6 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::numeric;
 
 /// Search space of [`fit_all`].
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -380,8 +381,22 @@ impl Design {
         let mut f_train = raw(x_train);
         let mut f_val = raw(x_val);
         if f_train.iter().chain(f_val.iter()).any(|v| !v.is_finite()) {
+            // The cause is an input far from the others (an outlier, a wrong unit), not the degree.
+            let (mut worst, mut at) = (0.0_f64, 0);
+            for x in [x_train, x_val] {
+                for r in 0..x.nrows() {
+                    for k in 0..c {
+                        let z = ((x[(r, k)] - input_mean[k]) / input_scale[k]).abs();
+                        if z.is_nan() || z > worst {
+                            (worst, at) = (z, k);
+                        }
+                    }
+                }
+            }
             return Err(Error::Invalid(format!(
-                "regression: polynomial features of degree {max_degree} overflow; lower max_degree"
+                "regression: polynomial features of degree {max_degree} overflow: a value of input {} lies \
+                 {worst:.1e} standard deviations from its training mean (an outlier or a wrong unit in the data)",
+                at + 1
             )));
         }
         let mut feature_mean = Vec::with_capacity(p);
@@ -525,10 +540,16 @@ impl Block {
             // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
             // the limit of ridge as α → 0.
             None => {
-                let svd = shifted().svd(true, true);
-                let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
-                svd.solve(&self.b, eps)
-                    .unwrap_or_else(|_| DVector::zeros(n))
+                // A Gram matrix that is not finite gives NaN coefficients and a NaN score, which the
+                // search never chooses, rather than an SVD that never returns.
+                match numeric::svd(shifted(), true, true, "ridge") {
+                    Ok(svd) => {
+                        let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
+                        svd.solve(&self.b, eps)
+                            .unwrap_or_else(|_| DVector::zeros(n))
+                    }
+                    Err(_) => DVector::from_element(n, f64::NAN),
+                }
             }
         };
         let sse = target.rr - 2.0 * w.dot(&self.cv) + w.dot(&(&self.gv * &w));

@@ -9,6 +9,7 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{Error, Result};
+use crate::numeric;
 
 /// The fitted transform with what is left over, so callers can judge the fit (and spot outliers) without
 /// recomputing it.
@@ -93,8 +94,7 @@ pub fn register_points(from: &[Point3<f64>], to: &[Point3<f64>]) -> Result<Rigid
             "registration: coordinates too large for a finite cross-covariance".into(),
         ));
     }
-    let svd = nalgebra::SVD::try_new(h, true, true, f64::EPSILON, 10_000)
-        .ok_or_else(|| Error::Invalid("registration: SVD did not converge".into()))?;
+    let svd = numeric::svd(h, true, true, "registration")?;
     let s = svd.singular_values; // sorted, largest first
     if s[1] <= COLLINEAR_TOL * s[0] {
         return Err(Error::Invalid(format!(

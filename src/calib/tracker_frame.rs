@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::numeric;
 use crate::robot::dh::DhChain;
 use crate::robot::plausible;
 
@@ -244,7 +245,7 @@ pub fn probe_rotation(
 
 /// The rotation nearest (Frobenius) to `sum`, a sum of rotation matrices.
 fn mean_rotation(sum: &Matrix3<f64>) -> Result<UnitQuaternion<f64>> {
-    let svd = sum.svd(true, true);
+    let svd = numeric::svd(*sum, true, true, "probe rotation")?;
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
         return Err(Error::Invalid(
             "probe rotation: SVD returned no basis".into(),
@@ -316,7 +317,10 @@ pub fn turning_directions(flanges: &[Isometry3<f64>], min_turn: f64) -> Vec<Vect
         .map(|r| (r - mean).transpose() * (r - mean))
         .sum::<Matrix3<f64>>()
         / rotations.len() as f64;
-    let eigen = spread.symmetric_eigen();
+    // Non-finite flange poses observe no direction.
+    let Ok(eigen) = numeric::symmetric_eigen3(spread, "turning directions") else {
+        return Vec::new();
+    };
     (0..3)
         .filter(|&k| eigen.eigenvalues[k] >= min_turn * min_turn)
         .map(|k| eigen.eigenvectors.column(k).normalize())
@@ -365,8 +369,8 @@ fn fit_frame(
         .minimize(problem);
     if !report.termination.was_successful() {
         return Err(Error::Invalid(format!(
-            "tracker frame: the least-squares refinement did not converge ({:?})",
-            report.termination
+            "tracker frame: the least-squares refinement failed: {}",
+            numeric::stopped(&report.termination)
         )));
     }
     let (transform, mounting) = problem.unpack();

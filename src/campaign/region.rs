@@ -8,6 +8,16 @@ use serde::{Deserialize, Serialize};
 use super::distribution::DistributionKind;
 use crate::robot::collision::Obstacle;
 
+/// The most points a region may ask for. The paper measured 2 335 and the real UR10 series a few thousand;
+/// a hundred thousand is forty times that, and with up to 50 candidate targets planned per point it is
+/// already millions of inverse-kinematics solves. Without a cap, `points = 100000000` grew memory
+/// without end.
+pub const MAX_REGION_POINTS: usize = 100_000;
+
+/// The largest candidate pool of a model-based layout, on the same grounds (every candidate is planned and
+/// its identification Jacobian kept).
+pub const MAX_POOL: usize = 100_000;
+
 fn default_distribution() -> DistributionKind {
     DistributionKind::Uniform
 }
@@ -49,8 +59,11 @@ impl RegionConfig {
                 self.size_m
             ));
         }
-        if self.points == 0 {
-            return Err("points must be at least 1".into());
+        if !(1..=MAX_REGION_POINTS).contains(&self.points) {
+            return Err(format!(
+                "points = {}: between 1 and {MAX_REGION_POINTS} per region",
+                self.points
+            ));
         }
         if !(0.0..90.0).contains(&self.cone_half_angle_deg) {
             return Err(format!(
@@ -181,6 +194,18 @@ impl SelectionConfig {
             return Err(format!(
                 "selection.pool_factor = {} must be finite and at least 1",
                 self.pool_factor
+            ));
+        }
+        if self.pool_max > MAX_POOL {
+            return Err(format!(
+                "selection.pool_max = {} exceeds {MAX_POOL}",
+                self.pool_max
+            ));
+        }
+        if self.max_exchanges.is_some_and(|m| m > 100 * MAX_POOL) {
+            return Err(format!(
+                "selection.max_exchanges exceeds {}",
+                100 * MAX_POOL
             ));
         }
         if self.pool_max < self.pool_min || self.pool_min == 0 {

@@ -38,7 +38,7 @@ use std::path::Path;
 use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::table::{Dialect, Table};
+use super::table::{self, Dialect, Table};
 use super::{Dataset, ExtraInputs};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
@@ -534,8 +534,9 @@ impl ColumnMapping {
                     }
                     if let Some(first) = seen.insert(id.to_string(), r) {
                         return Err(table.error(format!(
-                            "{}: '{id}' repeats row {}",
+                            "{}: '{}' repeats row {}",
                             table.at(r, c),
+                            table::shown(id),
                             first + 2
                         )));
                     }

@@ -18,6 +18,7 @@ use nalgebra::{Isometry3, Point3, Quaternion, Translation3, Unit, UnitQuaternion
 use crate::error::Result;
 
 pub mod mapping;
+pub mod range;
 mod split;
 mod table;
 mod truth_table;
@@ -359,8 +360,9 @@ impl Table {
             }
             if let Some(first) = seen.insert(id, r) {
                 return Err(self.error(format!(
-                    "{}: '{id}' repeats row {}",
+                    "{}: '{}' repeats row {}",
                     self.at(r, c),
+                    table::shown(id),
                     first + 2
                 )));
             }

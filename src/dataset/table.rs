@@ -18,6 +18,20 @@ pub(super) fn open(path: &Path) -> Result<std::fs::File> {
     })
 }
 
+/// A cell or header as a message shows it: whole when short, its first [`SHOWN_CHARS`] characters and its
+/// length otherwise (a 10 MB cell is not echoed into an error line).
+pub(super) fn shown(cell: &str) -> String {
+    if cell.chars().count() <= SHOWN_CHARS {
+        cell.to_string()
+    } else {
+        let head: String = cell.chars().take(SHOWN_CHARS).collect();
+        format!("{head}… ({} characters)", cell.chars().count())
+    }
+}
+
+/// How much of a cell a message shows.
+pub(super) const SHOWN_CHARS: usize = 40;
+
 /// How a delimited file is written: `,` and `.` for the project's own files, anything for a mapped export.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Dialect {
@@ -100,7 +114,8 @@ impl Table {
             }
             if let Some(first) = index.insert(h.clone(), i) {
                 return Err(err(format!(
-                    "row 1: column '{h}' appears twice (columns {} and {})",
+                    "row 1: column '{}' appears twice (columns {} and {})",
+                    shown(h),
                     first + 1,
                     i + 1
                 )));
@@ -143,14 +158,10 @@ impl Table {
     pub(super) fn find(&self, name: &str, role: &str) -> Result<usize> {
         self.index.get(name.trim()).copied().ok_or_else(|| {
             const SHOWN: usize = 16;
-            let mut names: Vec<&str> = self
-                .headers
-                .iter()
-                .take(SHOWN)
-                .map(String::as_str)
-                .collect();
+            let mut names: Vec<String> =
+                self.headers.iter().take(SHOWN).map(|h| shown(h)).collect();
             if self.headers.len() > SHOWN {
-                names.push("…");
+                names.push("…".into());
             }
             self.error(format!(
                 "no column '{name}' (the mapping's {role}); the header has {} columns: {}",
@@ -174,12 +185,7 @@ impl Table {
     /// The header's names, the first few of them when there are many.
     pub(super) fn header_summary(&self) -> String {
         const SHOWN: usize = 12;
-        let names: Vec<&str> = self
-            .headers
-            .iter()
-            .take(SHOWN)
-            .map(String::as_str)
-            .collect();
+        let names: Vec<String> = self.headers.iter().take(SHOWN).map(|h| shown(h)).collect();
         if self.headers.len() > SHOWN {
             format!("{}, … ({} columns)", names.join(", "), self.headers.len())
         } else {
@@ -189,7 +195,7 @@ impl Table {
 
     /// "row R, column NAME" for data row `r` (0-based).
     pub(super) fn at(&self, r: usize, c: usize) -> String {
-        format!("row {}, column {}", r + 2, self.headers[c])
+        format!("row {}, column {}", r + 2, shown(&self.headers[c]))
     }
 
     pub(super) fn cell(&self, r: usize, c: usize) -> &str {
@@ -202,8 +208,9 @@ impl Table {
         let cell = self.cell(r, c);
         Split::parse(cell).ok_or_else(|| {
             self.error(format!(
-                "{}: '{cell}' is not a split (train, val, validation or test)",
-                self.at(r, c)
+                "{}: '{}' is not a split (train, val, validation or test)",
+                self.at(r, c),
+                shown(cell)
             ))
         })
     }
@@ -220,6 +227,7 @@ impl Table {
             } else {
                 String::new()
             };
+            let cell = shown(cell);
             self.error(format!("{}: '{cell}' is not a number{hint}", self.at(r, c)))
         };
         let value: f64 = if decimal == '.' {
@@ -236,6 +244,7 @@ impl Table {
                 .map_err(|_| not_a_number())?
         };
         if !value.is_finite() {
+            let cell = shown(cell);
             return Err(self.error(format!("{}: '{cell}' is not finite", self.at(r, c))));
         }
         Ok(value)

@@ -17,6 +17,8 @@
 use nalgebra::DMatrix;
 use serde::Serialize;
 
+use crate::numeric;
+
 /// Singular values below this fraction of the largest count as zero.
 pub const RANK_REL: f64 = 1e-10;
 
@@ -56,7 +58,10 @@ impl Indices {
         } else {
             j.clone()
         };
-        let s = square.singular_values();
+        let Ok(svd) = numeric::svd(square, false, false, "observability") else {
+            return deficient;
+        };
+        let s = svd.singular_values;
         let smax = s.max();
         let rank = s.iter().filter(|&&v| v > RANK_REL * smax).count();
         if rank < k || smax <= 0.0 {

@@ -31,6 +31,38 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
         return Err(err("no links".into()));
     }
 
+    // One name, one thing: a data column is matched to a joint by its name, so a repeated name would drive
+    // two joints from one column (issue 14: 81 mm of error, and no complaint).
+    for (what, names) in [
+        (
+            "link",
+            robot
+                .links
+                .iter()
+                .map(|l| l.name.as_str())
+                .collect::<Vec<_>>(),
+        ),
+        (
+            "joint",
+            robot.joints.iter().map(|j| j.name.as_str()).collect(),
+        ),
+    ] {
+        for (i, name) in names.iter().enumerate() {
+            if names[..i].contains(name) {
+                return Err(err(format!(
+                    "two {what}s are named '{name}'; names must be unique"
+                )));
+            }
+        }
+    }
+    if let Some(j) = robot.joints.iter().find(|j| j.mimic.is_some()) {
+        let leader = j.mimic.as_ref().map_or("", |m| m.joint.as_str());
+        return Err(err(format!(
+            "joint '{}' mimics '{leader}': mimic joints are not supported (every joint is read from its own \
+             column; model a coupled joint as fixed or give it its own column)",
+            j.name
+        )));
+    }
     let link_index: HashMap<&str, usize> = robot
         .links
         .iter()
@@ -191,6 +223,19 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
                     urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
                     _ => (j.limit.lower, j.limit.upper),
                 };
+                // urdf-rs reads a missing `<limit>` as [0, 0]: a joint that cannot move, never meant.
+                if j.joint_type != urdf_rs::JointType::Continuous && lower == 0.0 && upper == 0.0 {
+                    return Err(err(format!(
+                        "joint '{}' has no <limit> (or limits [0, 0]): a {} joint needs lower and upper \
+                         limits (an unlimited revolute joint is type=\"continuous\")",
+                        j.name,
+                        if kind == JointKind::Prismatic {
+                            "prismatic"
+                        } else {
+                            "revolute"
+                        }
+                    )));
+                }
                 if lower.is_nan() || upper.is_nan() || lower > upper {
                     return Err(err(format!(
                         "joint '{}' has limits [{lower}, {upper}]",

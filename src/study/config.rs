@@ -169,6 +169,43 @@ impl StudyConfig {
         n + self.validation_points(n)
     }
 
+    /// Runs of the study: every (region, layout, size, seed) campaign fitted by every method and the oracle.
+    pub fn runs(&self, regions: usize) -> u128 {
+        self.campaigns(regions) * (self.methods.len() as u128 + 1)
+    }
+
+    fn campaigns(&self, regions: usize) -> u128 {
+        (regions as u128)
+            * (self.distributions.len() as u128)
+            * (self.sizes.len() as u128)
+            * (self.seeds as u128)
+    }
+
+    /// The study's cost in core-seconds, estimated before anything runs: every campaign point simulated and
+    /// fitted by every method, every evaluation point predicted by every run. The rates are measured on the
+    /// default study (`scenarios/default.toml`: 1 750 runs, 40 core-seconds on the 2-core reference machine;
+    /// `benches/calibrate.rs` gives 16–65 µs per training point for the methods); a d-optimal pool adds a few
+    /// per cent. An estimate to refuse absurd studies, not a prediction to the second.
+    pub fn estimated_core_seconds(&self, regions: usize) -> f64 {
+        const SIMULATE_S_PER_POINT: f64 = 20e-6;
+        const FIT_S_PER_POINT: f64 = 30e-6;
+        const EVALUATE_S_PER_POINT: f64 = 6e-6;
+        let methods = self.methods.len() as f64 + 1.0;
+        let per_layout_and_seed: f64 = self
+            .sizes
+            .iter()
+            .map(|&n| self.campaign_points(n) as f64)
+            .sum::<f64>()
+            * (SIMULATE_S_PER_POINT + methods * FIT_S_PER_POINT);
+        let combos = (regions * self.distributions.len()) as f64 * self.seeds as f64;
+        let sets =
+            (self.test_points + self.grid_points + self.shell_points + self.closed_loop_points)
+                as f64;
+        combos * per_layout_and_seed
+            + self.campaigns(regions) as f64 * methods * sets * EVALUATE_S_PER_POINT
+            + regions as f64 * sets * SIMULATE_S_PER_POINT
+    }
+
     /// The method shown point by point: `detail_method`, or the first method.
     pub fn detail_method(&self) -> &str {
         self.detail_method

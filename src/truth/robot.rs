@@ -297,16 +297,26 @@ impl TrueRobot {
                 }
             }
             if !step.is_finite() {
-                break;
+                return Err(Error::Physics(format!(
+                    "static deflection: the gravity torques are not finite numbers at iteration {iter} (a \
+                     frame offset, mass or joint angle far too large for a robot)"
+                )));
             }
             if step < FIXED_POINT_TOL {
                 self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
                 return Ok(iter);
             }
         }
+        let worst = state
+            .tau
+            .iter()
+            .zip(&self.compliance)
+            .map(|(t, c)| (t * c).abs())
+            .fold(0.0, f64::max);
         Err(Error::Physics(format!(
-            "static deflection did not converge in {FIXED_POINT_MAX_ITERS} fixed-point iterations: \
-             the joints are too soft for the load"
+            "static deflection did not converge in {FIXED_POINT_MAX_ITERS} fixed-point iterations (a \
+             deflection of {worst:.2e} rad): the joints are too soft for the load, or a mass or frame offset \
+             is far larger than a robot's"
         )))
     }
 

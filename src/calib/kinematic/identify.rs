@@ -1,6 +1,7 @@
 //! Which parameters the kinematic fit keeps (structural, fixed configurations), whether the training data
 //! identify them (rank, condition number), and the identification Jacobian for experiment design.
 
+use crate::numeric;
 use nalgebra::{DMatrix, DVector, Point3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -139,7 +140,15 @@ pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiabi
             }
             s
         });
-    let svd = square.svd(false, true);
+    // A non-finite Jacobian (joint values far outside the robot's range) identifies nothing.
+    let Ok(svd) = numeric::svd(square, false, true, "identifiability") else {
+        return Identifiability {
+            rank: 0,
+            condition: f64::INFINITY,
+            weakest: Vec::new(),
+            whitening: None,
+        };
+    };
     let s = &svd.singular_values;
     let smax = s.max();
     let rank = s.iter().filter(|&&v| v > RANK_REL * smax).count();

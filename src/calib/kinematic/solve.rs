@@ -132,7 +132,7 @@ pub(super) fn minimize(
                 "no convergence within {max_evaluations} evaluations"
             ));
         }
-        other => return Err(format!("{other:?}")),
+        other => return Err(crate::numeric::stopped(&other)),
     };
     // The crate counts patience in units of (parameters + 1) evaluations; the cap is the caller's, exactly.
     let evaluations = report.number_of_evaluations + evaluations_before;
