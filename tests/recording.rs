@@ -139,6 +139,10 @@ fn study(chain: &Chain) -> StudyResult {
         closed_loop_points: 5,
         detail_method: None,
         distance_bands_m: vec![0.025, 0.05],
+        targets_mm: vec![0.3, 0.1, 0.05, 0.02],
+        move_s: 3.0,
+        settle_s: 2.0,
+        measure_s: 1.0,
     };
     StudyResult {
         world: scenario.world_config(),
@@ -147,6 +151,7 @@ fn study(chain: &Chain) -> StudyResult {
         runs,
         detail,
         orientation: false,
+        limits: Vec::new(),
     }
 }
 

@@ -4,6 +4,7 @@
 
 mod common;
 
+mod answer;
 mod calibrate;
 mod calibrate_cli;
 mod campaign;

@@ -60,7 +60,7 @@ fn render(
 }
 
 /// A name safe as a file name: letters, digits, `-`, `_` and `.` kept, anything else `_`.
-fn file_safe(s: &str) -> String {
+pub(super) fn file_safe(s: &str) -> String {
     s.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {

@@ -122,6 +122,7 @@ fn region_truth(truth: &GroundTruth, region: &str) -> GroundTruth {
 struct RegionSets {
     test: Dataset,
     truth: GroundTruth,
+    limits: super::Limits,
 }
 
 /// One campaign of the sweep: indices into the scenario's regions and the study's lists.
@@ -217,6 +218,7 @@ pub fn run_study(
                     ))
                 })?;
             Ok(RegionSets {
+                limits: super::Limits::of(world, &region.name, &campaign),
                 test: as_dataset(
                     &campaign,
                     &format!("the test set of region '{}'", region.name),
@@ -274,6 +276,7 @@ pub fn run_study(
     }
     keyed.sort_by_key(|(k, _)| *k);
     let runs: Vec<RunMetrics> = keyed.into_iter().map(|(_, run)| run).collect();
+    let limits = shared.regions.iter().map(|r| r.limits.clone()).collect();
     let detail = details
         .into_iter()
         .max_by_key(|d| d.n_train)
@@ -294,6 +297,7 @@ pub fn run_study(
         runs,
         detail,
         orientation: world.mounting.count() >= 3,
+        limits,
     })
 }
 
