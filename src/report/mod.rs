@@ -5,6 +5,7 @@
 
 pub mod aggregate;
 pub mod answer;
+pub mod blueprint;
 pub mod metrics;
 pub mod plots;
 pub mod recording;
