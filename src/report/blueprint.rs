@@ -16,12 +16,12 @@
 use nalgebra::{Point3, Vector3};
 use rerun::external::re_log_types::BlueprintActivationCommand;
 use rerun::external::re_sdk_types::blueprint::archetypes::{
-    ContainerBlueprint, EyeControls3D, TimePanelBlueprint, ViewBlueprint, ViewContents,
-    ViewportBlueprint,
+    ContainerBlueprint, EyeControls3D, PanelBlueprint, TimePanelBlueprint, ViewBlueprint,
+    ViewContents, ViewportBlueprint,
 };
 use rerun::external::re_sdk_types::blueprint::components::{
     ActiveTab, AutoLayout, AutoViews, ColumnShare, ContainerKind, Eye3DKind, IncludedContent,
-    QueryExpression, RootContainer, RowShare, TimelineName, ViewClass,
+    PanelState, PlayState, QueryExpression, RootContainer, RowShare, TimelineName, ViewClass,
 };
 use rerun::external::re_sdk_types::components::Name;
 use rerun::external::re_sdk_types::datatypes;
@@ -198,9 +198,20 @@ pub fn send(rec: &RecordingStream, app: &'static str, name: &str, layout: &Layou
     stream
         .log(
             "time_panel",
-            &TimePanelBlueprint::new().with_timeline(TimelineName(layout.timeline.clone().into())),
+            &TimePanelBlueprint::new()
+                .with_timeline(TimelineName(layout.timeline.clone().into()))
+                .with_play_state(PlayState::Paused),
         )
         .map_err(err)?;
+    // The views need the width more than the entity tree and the selection do; both open collapsed.
+    for panel in ["blueprint_panel", "selection_panel"] {
+        stream
+            .log(
+                panel,
+                &PanelBlueprint::new().with_state(PanelState::Collapsed),
+            )
+            .map_err(err)?;
+    }
     stream.flush_blocking().map_err(err)?;
     let messages = storage.take();
     let Some(blueprint_id) = messages.first().map(|m| m.store_id().clone()) else {

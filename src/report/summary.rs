@@ -230,7 +230,75 @@ fn verdict(method: &str, curves: &[&Curve], study: &StudyResult, answers: &[Answ
         ),
         None => "; it reaches none of the targets".to_string(),
     };
-    format!("**{method}**: {curve}{target}.{failures}")
+    format!(
+        "**{method}**: {curve}{target}.{}{failures}",
+        layout_sentence(method, curves)
+    )
+}
+
+/// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
+/// largest size both have, and the reason its design implies.
+fn layout_sentence(method: &str, curves: &[&Curve]) -> String {
+    use crate::design::layout::Design;
+    let Ok(kind) = crate::calib::registry::MethodKind::parse(method) else {
+        return String::new();
+    };
+    let Some(designed) = curves.iter().find(|c| c.distribution.selects()) else {
+        return String::new();
+    };
+    let at = |c: &Curve, n: usize| {
+        c.points
+            .iter()
+            .find(|p| p.n_train == n)
+            .and_then(|p| p.truth)
+            .map(|s| s.median)
+    };
+    let best = designed.points.iter().rev().find_map(|p| {
+        let mine = p.truth?.median;
+        curves
+            .iter()
+            .filter(|c| !c.distribution.selects())
+            .filter_map(|c| Some((at(c, p.n_train)?, *c)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(other, c)| (p.n_train, mine, other, c))
+    });
+    let Some((n, mine, other, geometric)) = best else {
+        return String::new();
+    };
+    let design = Design::of(kind);
+    let ratio = mine / other;
+    let (verb, why) = match (design, ratio) {
+        (_, r) if (0.95..=1.05).contains(&r) => (
+            "makes little difference to it",
+            "the layout matters little for this model at this size",
+        ),
+        (Design::Parameters(_), r) if r < 1.0 => (
+            "helps it",
+            "points chosen to determine its own parameters pay when its model describes the robot",
+        ),
+        (Design::Parameters(_), _) => (
+            "hurts it",
+            "D-optimal points sit at the extremes of the joint space, where the errors its model lacks are \
+             largest, so the fit is biased for the rest of the region (D-optimality assumes the model is right)",
+        ),
+        (Design::SpaceFilling, r) if r < 1.0 => (
+            "helps it",
+            "it fits a function of the joint angles, and space-filling points cover those inputs evenly",
+        ),
+        (Design::SpaceFilling, _) => (
+            "hurts it",
+            "it fits a function of the joint angles, and maximin points crowd the edges of the reachable joint \
+             space, leaving the middle of the region, where most targets are, sparser than random points do",
+        ),
+    };
+    format!(
+        " The {} layout ({}) {verb}: {} against {} mm with {} at {n} points — {why}.",
+        designed.distribution.name(),
+        design.describe(),
+        fmt_mm(mine),
+        fmt_mm(other),
+        geometric.distribution.name(),
+    )
 }
 
 /// The method whose parameters a method's observability describes, when another listed method has the same

@@ -29,9 +29,12 @@ use super::{
 };
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
-use crate::campaign::{Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig};
+use crate::campaign::{
+    Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig, Selector,
+};
 use crate::dataset::Dataset;
-use crate::design::{DOptimal, DesignModel, Indices};
+use crate::design::layout::Design;
+use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::accuracy::{
     GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
@@ -58,14 +61,12 @@ fn layout_index(d: DistributionKind) -> u64 {
         .expect("every layout is in ALL") as u64
 }
 
-/// Where a study's campaigns are measured, and how: the world, the campaign configuration, the regions, and the
-/// selector of model-based layouts.
+/// Where a study's campaigns are measured, and how: the world, the campaign configuration and the regions.
 #[derive(Clone, Copy)]
 struct Measure<'a> {
     world: &'a World,
     campaign: &'a CampaignConfig,
     regions: &'a [RegionConfig],
-    selector: Option<&'a dyn crate::campaign::Selector>,
 }
 
 impl Measure<'_> {
@@ -77,18 +78,36 @@ impl Measure<'_> {
         points: usize,
         seed: u64,
     ) -> Result<Campaign> {
+        self.campaigns(r, layout, points, seed, &[])?
+            .pop()
+            .expect("one campaign")
+    }
+
+    /// The campaigns of a model-based `layout`, one per selector, chosen from one shared pool; of a geometric
+    /// layout (no selectors), the one campaign.
+    fn campaigns(
+        &self,
+        r: usize,
+        layout: DistributionKind,
+        points: usize,
+        seed: u64,
+        selectors: &[&dyn Selector],
+    ) -> Result<Vec<Result<Campaign>>> {
         let region = RegionConfig {
             points,
             distribution: layout,
             ..self.regions[r].clone()
         };
-        Generator {
+        let generator = Generator {
             world: self.world,
             config: self.campaign,
             seed,
-            selector: self.selector,
+            selector: None,
+        };
+        if selectors.is_empty() {
+            return Ok(vec![generator.run(std::slice::from_ref(&region))]);
         }
-        .run(std::slice::from_ref(&region))
+        generator.run_selected(std::slice::from_ref(&region), selectors)
     }
 }
 
@@ -152,6 +171,9 @@ struct Shared<'a> {
     measure: Measure<'a>,
     config: &'a StudyConfig,
     world: &'a World,
+    /// The selectors of model-based layouts, one per distinct design, and each method's index into them.
+    selectors: Vec<&'a dyn Selector>,
+    design_of: Vec<usize>,
     ctx: FitContext<'a>,
     /// Per method, the model whose observability the run reports.
     designs: Vec<Option<DesignModel<'a>>>,
@@ -188,19 +210,34 @@ pub fn run_study(
         .unwrap_or(0);
 
     let ctx = fit_context(world);
-    let selector = DOptimal::when_needed(
-        config.distributions.iter().copied(),
-        &campaign.selection,
-        &ctx,
-        &world.mounting.nominal,
-    )?;
+    // Model-based layouts choose each method's points for that method: one selector per distinct design.
+    let mut layouts: Vec<Design> = Vec::new();
+    let mut design_of = Vec::with_capacity(kinds.len());
+    for &kind in &kinds {
+        let design = Design::of(kind);
+        design_of.push(
+            layouts
+                .iter()
+                .position(|d| *d == design)
+                .unwrap_or_else(|| {
+                    layouts.push(design);
+                    layouts.len() - 1
+                }),
+        );
+    }
+    let selectors: Vec<Box<dyn Selector + '_>> = if config.distributions.iter().any(|d| d.selects())
+    {
+        layouts
+            .iter()
+            .map(|d| d.selector(&ctx, &world.mounting.nominal, &campaign.selection))
+            .collect::<Result<_>>()?
+    } else {
+        Vec::new()
+    };
     let measure = Measure {
         world,
         campaign,
         regions,
-        selector: selector
-            .as_ref()
-            .map(|s| s as &dyn crate::campaign::Selector),
     };
     let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth_config())?;
     let region_sets = regions
@@ -252,6 +289,8 @@ pub fn run_study(
         measure,
         config,
         world,
+        selectors: selectors.iter().map(|s| s.as_ref()).collect(),
+        design_of,
         ctx,
         designs,
         kinds,
@@ -370,44 +409,73 @@ impl Shared<'_> {
             n as u64,
             job.seed,
         );
-        let (campaign, train, val) = match self.prepare(job, seed) {
-            Ok(prepared) => prepared,
-            Err(e) => {
-                let reason = reason(&e);
-                let runs = (0..self.kinds.len())
-                    .map(|m| (m, self.failed(job, m, reason.clone(), 0.0)))
-                    .collect();
-                self.progress.add(self.kinds.len());
-                return JobOutput { runs, detail: None };
+        let k = self.kinds.len();
+        // Which methods share a campaign: all of them, or, for a model-based layout, those of one design.
+        let bundles: Vec<(Vec<usize>, Result<Prepared>)> = if layout.selects() {
+            match self.prepare_designed(job, seed) {
+                Ok(prepared) => prepared
+                    .into_iter()
+                    .enumerate()
+                    .map(|(g, p)| ((0..k).filter(|&m| self.design_of[m] == g).collect(), p))
+                    .collect(),
+                Err(e) => vec![((0..k).collect(), Err(e))],
             }
-        };
-        let sets = &self.regions[job.region];
-        let floor_mean = Oracle::new(self.world)
-            .and_then(|o| o.registered_on(&[&train, &val]))
-            .ok()
-            .and_then(|oracle| {
-                Stats::of(&truth_errors(&oracle, &sets.truth, &sets.truth.grid.points).position)
-            })
-            .map(|s| s.mean);
-        let detail_job = self.is_detail_candidate(job);
-        let observability = self.observability(&train);
-        let outcomes: Vec<MethodRun> = (0..self.kinds.len())
-            .into_par_iter()
-            .map(|m| {
-                let mut outcome =
-                    self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
-                if outcome.metrics.failure.is_none() {
-                    outcome.metrics.observability = observability[m];
-                }
-                self.progress.add(1);
-                outcome
-            })
-            .collect();
-        let detail = if detail_job {
-            self.detail(job, region, &campaign, &train, &val, &outcomes)
         } else {
-            None
+            vec![((0..k).collect(), self.prepare(job, seed))]
         };
+        let detail_job = self.is_detail_candidate(job);
+        let mut outcomes: Vec<Option<MethodRun>> = (0..k).map(|_| None).collect();
+        let mut detail_campaign = None;
+        for (methods, prepared) in bundles {
+            let (campaign, train, val) = match prepared {
+                Ok(prepared) => prepared,
+                Err(e) => {
+                    let reason = reason(&e);
+                    for &m in &methods {
+                        outcomes[m] = Some(MethodRun {
+                            metrics: self.failed(job, m, reason.clone(), 0.0),
+                            points: None,
+                        });
+                    }
+                    self.progress.add(methods.len());
+                    continue;
+                }
+            };
+            let sets = &self.regions[job.region];
+            let floor_mean = Oracle::new(self.world)
+                .and_then(|o| o.registered_on(&[&train, &val]))
+                .ok()
+                .and_then(|oracle| {
+                    Stats::of(&truth_errors(&oracle, &sets.truth, &sets.truth.grid.points).position)
+                })
+                .map(|s| s.mean);
+            let observability = self.observability(&train);
+            let runs: Vec<(usize, MethodRun)> = methods
+                .par_iter()
+                .map(|&m| {
+                    let mut outcome =
+                        self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
+                    if outcome.metrics.failure.is_none() {
+                        outcome.metrics.observability = observability[m];
+                    }
+                    self.progress.add(1);
+                    (m, outcome)
+                })
+                .collect();
+            for (m, run) in runs {
+                outcomes[m] = Some(run);
+            }
+            if detail_job && methods.contains(&self.detail_method) {
+                detail_campaign = Some((campaign, train, val));
+            }
+        }
+        let outcomes: Vec<MethodRun> = outcomes
+            .into_iter()
+            .map(|o| o.expect("every method belongs to one bundle"))
+            .collect();
+        let detail = detail_campaign.and_then(|(campaign, train, val)| {
+            self.detail(job, region, &campaign, &train, &val, &outcomes)
+        });
         JobOutput {
             runs: outcomes
                 .into_iter()
@@ -418,19 +486,30 @@ impl Shared<'_> {
         }
     }
 
-    /// The job's campaign and its training and validation sets.
-    fn prepare(&self, job: Job, seed: u64) -> Result<(Campaign, Dataset, Dataset)> {
+    /// The campaigns of a model-based layout, one per design (in the order of `self.selectors`), each split into
+    /// training and validation sets; an error when the shared pool cannot be planned.
+    fn prepare_designed(&self, job: Job, seed: u64) -> Result<Vec<Result<Prepared>>> {
         let n = self.config.sizes[job.size];
         let layout = self.config.distributions[job.distribution];
         let total = self.config.campaign_points(n);
-        let campaign = self.measure.campaign(job.region, layout, total, seed)?;
-        let data = as_dataset(&campaign, "the study's campaign")?;
-        let mut order: Vec<usize> = (0..data.len()).collect();
-        order.shuffle(&mut derive(seed, Stream::Split, &[]));
-        let (mut train, mut val) = (order[..n.min(order.len())].to_vec(), order[n..].to_vec());
-        train.sort_unstable();
-        val.sort_unstable();
-        Ok((campaign, data.subset(&train), data.subset(&val)))
+        Ok(self
+            .measure
+            .campaigns(job.region, layout, total, seed, &self.selectors)?
+            .into_iter()
+            .map(|c| split(c?, n, seed))
+            .collect())
+    }
+
+    /// The job's campaign and its training and validation sets.
+    fn prepare(&self, job: Job, seed: u64) -> Result<Prepared> {
+        let n = self.config.sizes[job.size];
+        let layout = self.config.distributions[job.distribution];
+        let total = self.config.campaign_points(n);
+        split(
+            self.measure.campaign(job.region, layout, total, seed)?,
+            n,
+            seed,
+        )
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -665,6 +744,21 @@ fn world_predictions(
         .iter()
         .map(|p| to_world * model.predict(&p.q_cmd).position)
         .collect()
+}
+
+/// A campaign with its training and validation sets.
+type Prepared = (Campaign, Dataset, Dataset);
+
+/// `campaign` split into `n` training points and the rest for validation, by a shuffle seeded from `seed`.
+fn split(campaign: Campaign, n: usize, seed: u64) -> Result<Prepared> {
+    let data = as_dataset(&campaign, "the study's campaign")?;
+    let mut order: Vec<usize> = (0..data.len()).collect();
+    order.shuffle(&mut derive(seed, Stream::Split, &[]));
+    let (mut train, mut val) = (order[..n.min(order.len())].to_vec(), order[n..].to_vec());
+    train.sort_unstable();
+    val.sort_unstable();
+    let (train, val) = (data.subset(&train), data.subset(&val));
+    Ok((campaign, train, val))
 }
 
 /// A failure's reason without the error kind's prefix where it says nothing.
