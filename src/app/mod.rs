@@ -85,3 +85,33 @@ fn study_config(scenario: &Scenario) -> Result<&StudyConfig> {
         .map_err(|message| scenario_err(format!("study.{message}")))?;
     Ok(config)
 }
+
+/// A binary's arguments, or — for a usage error — one `error:` line on stderr and exit status 1, as every other
+/// bad input gets (clap's own report spans several lines and exits with 2). `--help` and `--version` print and
+/// exit as usual.
+pub fn parse_args<P: clap::Parser>() -> P {
+    use clap::error::ErrorKind;
+    match P::try_parse() {
+        Ok(args) => args,
+        Err(e)
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) =>
+        {
+            e.exit()
+        }
+        Err(e) => {
+            let text = e.to_string();
+            let line: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && !l.starts_with("For more information"))
+                .collect();
+            eprintln!("error: {}", line.join(" ").trim_start_matches("error: "));
+            std::process::exit(1)
+        }
+    }
+}

@@ -50,7 +50,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args: Args = calibench::app::parse_args();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -287,8 +287,9 @@ fn layout_sentence(method: &str, curves: &[&Curve]) -> String {
         ),
         (Design::SpaceFilling, _) => (
             "hurts it",
-            "it fits a function of the joint angles, and maximin points crowd the edges of the reachable joint \
-             space, leaving the middle of the region, where most targets are, sparser than random points do",
+            "it fits a function of the joint angles, and maximin points favour the edges of the pool's joint \
+             space, so the configurations the region's targets mostly need are sampled more thinly than by \
+             random points",
         ),
     };
     format!(

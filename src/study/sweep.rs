@@ -6,7 +6,8 @@
 //! every (region, layout, size `n`, seed), one campaign of `n + ceil(validation_ratio · n)` measured points
 //! with that layout is generated, split into training and validation points by a seeded shuffle, and every
 //! method is fitted on it — together with the oracle, registered on the same points, whose ground-truth mean
-//! is the run's floor. A campaign the region cannot supply, or a method that cannot be fitted, makes failed
+//! is the run's floor. A model-based layout (`d-optimal`) gives each method the points chosen for it
+//! ([`Design`]): one pool per (region, layout, size, seed), one campaign per distinct design chosen from it. A campaign the region cannot supply, or a method that cannot be fitted, makes failed
 //! runs with the reason; the sweep goes on.
 //!
 //! Every random draw derives from (scenario seed, region index, layout, size, seed) — the layout's place in
@@ -21,8 +22,8 @@ use rand::RngCore;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
-use super::progress::Counter;
 pub use super::progress::Progress;
+use super::progress::{Counter, run_weight};
 use super::{
     BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
     StudyResult,
@@ -280,7 +281,11 @@ pub fn run_study(
             }
         }
     }
-    let counter = Counter::new(progress, jobs.len() * kinds.len());
+    let total_work = jobs
+        .iter()
+        .map(|j| kinds.len() as u64 * run_weight(config, config.sizes[j.size]))
+        .sum();
+    let counter = Counter::new(progress, jobs.len() * kinds.len(), total_work);
     let designs = kinds
         .iter()
         .map(|&kind| DesignModel::for_method(kind, &ctx, &world.mounting.nominal))
@@ -437,7 +442,7 @@ impl Shared<'_> {
                             points: None,
                         });
                     }
-                    self.progress.add(methods.len());
+                    self.progress.add(methods.len(), run_weight(self.config, n));
                     continue;
                 }
             };
@@ -458,7 +463,7 @@ impl Shared<'_> {
                     if outcome.metrics.failure.is_none() {
                         outcome.metrics.observability = observability[m];
                     }
-                    self.progress.add(1);
+                    self.progress.add(1, run_weight(self.config, n));
                     (m, outcome)
                 })
                 .collect();
