@@ -113,7 +113,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
         }
         let cols = layouts.len().min(2);
         let rows = layouts.len().div_ceil(cols);
-        let (pw, ph) = (1020u32, 680u32);
+        let (pw, ph) = (1045u32, 680u32);
         let name = format!("plots/learning_curves_{}.png", file_safe(region));
         let png = render(&name, (pw * cols as u32, ph * rows as u32), |root| {
             let panels = root.split_evenly((rows, cols));
@@ -152,7 +152,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
 }
 
 /// Width of the legend column right of each learning-curve panel (px): outside the plot, so it hides no curve.
-const LEGEND_WIDTH: u32 = 250;
+const LEGEND_WIDTH: u32 = 275;
 
 /// A hybrid (a method correcting another listed one) is drawn dashed: its curve often lies on its base's.
 fn dashed(method: &str) -> bool {
