@@ -17,6 +17,7 @@ use crate::world::WorldConfig;
 
 pub mod config;
 pub mod limits;
+mod measure;
 mod progress;
 pub mod sweep;
 

@@ -18,10 +18,11 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
-use rand::RngCore;
-use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
+use super::measure::{
+    Measure, Prepared, TEST_SET, campaign_seed, layout_index, region_truth, split,
+};
 pub use super::progress::Progress;
 use super::progress::{Counter, run_weight};
 use super::{
@@ -30,113 +31,17 @@ use super::{
 };
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
-use crate::campaign::{
-    Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig, Selector,
-};
+use crate::campaign::{Campaign, CampaignConfig, DistributionKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
 use crate::design::layout::Design;
 use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::accuracy::{
-    GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
+    GroundTruth, closed_loop_errors, fit_context, test_errors, truth_errors,
 };
 use crate::eval::{Oracle, Stats};
 use crate::measurements::as_dataset;
-use crate::rng::{Stream, derive};
 use crate::world::World;
-
-/// The region-level seed index of the test set, far from any layout index.
-const TEST_SET: u64 = u64::MAX;
-
-/// The seed of one campaign of the study: region `r`, layout `d` (its place in [`DistributionKind::ALL`]),
-/// training-set size `n` and repetition `s`; the test set uses `d = TEST_SET`.
-fn campaign_seed(scenario_seed: u64, r: u64, d: u64, n: u64, s: u64) -> u64 {
-    let region_layout = derive(scenario_seed, Stream::Study, &[r, d]).next_u64();
-    derive(region_layout, Stream::Study, &[n, s]).next_u64()
-}
-
-fn layout_index(d: DistributionKind) -> u64 {
-    DistributionKind::ALL
-        .iter()
-        .position(|&k| k == d)
-        .expect("every layout is in ALL") as u64
-}
-
-/// Where a study's campaigns are measured, and how: the world, the campaign configuration and the regions.
-#[derive(Clone, Copy)]
-struct Measure<'a> {
-    world: &'a World,
-    campaign: &'a CampaignConfig,
-    regions: &'a [RegionConfig],
-}
-
-impl Measure<'_> {
-    /// A campaign of `points` measured points in region `r` with `layout`, drawn from `seed`.
-    fn campaign(
-        &self,
-        r: usize,
-        layout: DistributionKind,
-        points: usize,
-        seed: u64,
-    ) -> Result<Campaign> {
-        self.campaigns(r, layout, points, seed, &[])?
-            .pop()
-            .expect("one campaign")
-    }
-
-    /// The campaigns of a model-based `layout`, one per selector, chosen from one shared pool; of a geometric
-    /// layout (no selectors), the one campaign.
-    fn campaigns(
-        &self,
-        r: usize,
-        layout: DistributionKind,
-        points: usize,
-        seed: u64,
-        selectors: &[&dyn Selector],
-    ) -> Result<Vec<Result<Campaign>>> {
-        let region = RegionConfig {
-            points,
-            distribution: layout,
-            ..self.regions[r].clone()
-        };
-        let generator = Generator {
-            world: self.world,
-            config: self.campaign,
-            seed,
-            selector: None,
-        };
-        if selectors.is_empty() {
-            return Ok(vec![generator.run(std::slice::from_ref(&region))]);
-        }
-        generator.run_selected(std::slice::from_ref(&region), selectors)
-    }
-}
-
-/// The ground truth restricted to one region.
-fn region_truth(truth: &GroundTruth, region: &str) -> GroundTruth {
-    let only = |set: &TruthSet| TruthSet {
-        points: set
-            .points
-            .iter()
-            .filter(|p| p.region == region)
-            .cloned()
-            .collect(),
-        rejections: set
-            .rejections
-            .iter()
-            .filter(|(name, _)| *name == region)
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect(),
-    };
-    GroundTruth {
-        tracker_pose: truth.tracker_pose,
-        measured_point: truth.measured_point,
-        nest_rotation: truth.nest_rotation,
-        grid: only(&truth.grid),
-        shell: only(&truth.shell),
-        closed_loop: only(&truth.closed_loop),
-    }
-}
 
 /// What every run of one region shares.
 struct RegionSets {
@@ -749,21 +654,6 @@ fn world_predictions(
         .iter()
         .map(|p| to_world * model.predict(&p.q_cmd).position)
         .collect()
-}
-
-/// A campaign with its training and validation sets.
-type Prepared = (Campaign, Dataset, Dataset);
-
-/// `campaign` split into `n` training points and the rest for validation, by a shuffle seeded from `seed`.
-fn split(campaign: Campaign, n: usize, seed: u64) -> Result<Prepared> {
-    let data = as_dataset(&campaign, "the study's campaign")?;
-    let mut order: Vec<usize> = (0..data.len()).collect();
-    order.shuffle(&mut derive(seed, Stream::Split, &[]));
-    let (mut train, mut val) = (order[..n.min(order.len())].to_vec(), order[n..].to_vec());
-    train.sort_unstable();
-    val.sort_unstable();
-    let (train, val) = (data.subset(&train), data.subset(&val));
-    Ok((campaign, train, val))
 }
 
 /// A failure's reason without the error kind's prefix where it says nothing.
