@@ -207,3 +207,88 @@ closed_loop_points = 5
         "d-optimal {optimal} vs uniform {uniform}"
     );
 }
+
+#[test]
+fn space_filling_spreads_the_points_over_the_pool_and_each_method_has_its_design() {
+    use calibench::calib::registry::MethodKind;
+    use calibench::campaign::Selector;
+    use calibench::design::layout::{Design, SpaceFilling};
+    // A 1-D pool 0..=10: the centre first, then the two ends.
+    let line: Vec<Vec<f64>> = (0..=10).map(|i| vec![i as f64]).collect();
+    let pool: Vec<&[f64]> = line.iter().map(Vec::as_slice).collect();
+    assert_eq!(SpaceFilling.choose(&pool, 3).unwrap(), [0, 5, 10]);
+    // A 5 × 5 grid in two joints with different ranges (scaled away): the centre, then the four corners.
+    let grid: Vec<Vec<f64>> = (0..25)
+        .map(|i| vec![(i % 5) as f64 * 0.1, (i / 5) as f64 * 2.0])
+        .collect();
+    let pool: Vec<&[f64]> = grid.iter().map(Vec::as_slice).collect();
+    assert_eq!(SpaceFilling.choose(&pool, 5).unwrap(), [0, 4, 12, 20, 24]);
+    assert!(SpaceFilling.choose(&pool, 26).is_err());
+
+    let design = |m: &str| Design::of(MethodKind::parse(m).unwrap());
+    let kinematic = MethodKind::parse("kinematic").unwrap();
+    let elastic = MethodKind::parse("elastic").unwrap();
+    assert_eq!(design("kinematic"), Design::Parameters(kinematic));
+    assert_eq!(design("hybrid-kinematic"), Design::Parameters(kinematic));
+    assert_eq!(design("elastic"), Design::Parameters(elastic));
+    assert_eq!(design("hybrid"), Design::Parameters(elastic));
+    for m in ["nominal", "paper-rotz", "paper-rotxyz", "residual-ridge"] {
+        assert_eq!(design(m), Design::SpaceFilling, "{m}");
+    }
+}
+
+#[test]
+fn in_a_study_d_optimal_points_are_chosen_for_the_method_that_uses_them() {
+    let study = r#"
+[study]
+sizes = [40]
+distributions = ["uniform", "d-optimal"]
+methods = ["kinematic", "hybrid-kinematic", "elastic", "residual-ridge"]
+seeds = 1
+test_points = 40
+grid_points = 60
+shell_width_m = 0.05
+shell_points = 0
+closed_loop_points = 0
+"#;
+    let text = GEOMETRIC.split("[evaluation]").next().unwrap().to_string() + study;
+    let scenario = Scenario::parse(&text, "per-method design").unwrap();
+    let result = run_study(&scenario, Progress::Hidden).unwrap();
+    let run = |layout: &str, method: &str| {
+        result
+            .runs
+            .iter()
+            .find(|r| r.key.distribution.name() == layout && r.key.method == method)
+            .unwrap_or_else(|| panic!("{layout} {method}"))
+    };
+    let floor = |layout: &str, method: &str| run(layout, method).floor_mean.unwrap();
+    // A geometric layout: one campaign for all, so one floor (the oracle registered on its points).
+    let uniform = floor("uniform", "kinematic");
+    for m in ["hybrid-kinematic", "elastic", "residual-ridge"] {
+        assert_eq!(floor("uniform", m), uniform, "{m}");
+    }
+    // d-optimal: a campaign per design. A hybrid shares its base's; the others differ.
+    assert_eq!(
+        floor("d-optimal", "kinematic"),
+        floor("d-optimal", "hybrid-kinematic")
+    );
+    assert_ne!(
+        floor("d-optimal", "kinematic"),
+        floor("d-optimal", "elastic")
+    );
+    assert_ne!(
+        floor("d-optimal", "kinematic"),
+        floor("d-optimal", "residual-ridge")
+    );
+    // Chosen with its own identification Jacobian: each parametric method's points determine its parameters
+    // better than uniform points do (ln det of its own information matrix).
+    for m in ["kinematic", "elastic"] {
+        let logdet = |layout: &str| run(layout, m).observability.unwrap().logdet;
+        assert!(
+            logdet("d-optimal") > logdet("uniform") + 1.0,
+            "{m}: d-optimal {} vs uniform {}",
+            logdet("d-optimal"),
+            logdet("uniform")
+        );
+    }
+}

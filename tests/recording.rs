@@ -12,7 +12,17 @@ use calibench::study::{
     BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
 };
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rerun::StoreKind;
 use rerun::external::re_log_encoding::DecoderApp;
+use rerun::external::re_sdk_types::archetypes::RecordingInfo;
+use rerun::external::re_sdk_types::blueprint::archetypes::{
+    ContainerBlueprint, EyeControls3D, TimePanelBlueprint, ViewBlueprint, ViewContents,
+    ViewportBlueprint,
+};
+use rerun::external::re_sdk_types::blueprint::components::{
+    IncludedContent, QueryExpression, RootContainer, TimelineName, ViewClass, ViewOrigin,
+};
+use rerun::external::re_sdk_types::components::{Name, Position3D};
 use rerun::log::{Chunk, LogMsg};
 
 const SIZES: [usize; 3] = [10, 20, 40];
@@ -139,6 +149,10 @@ fn study(chain: &Chain) -> StudyResult {
         closed_loop_points: 5,
         detail_method: None,
         distance_bands_m: vec![0.025, 0.05],
+        targets_mm: vec![0.3, 0.1, 0.05, 0.02],
+        move_s: 3.0,
+        settle_s: 2.0,
+        measure_s: 1.0,
     };
     StudyResult {
         world: scenario.world_config(),
@@ -147,6 +161,7 @@ fn study(chain: &Chain) -> StudyResult {
         runs,
         detail,
         orientation: false,
+        limits: Vec::new(),
     }
 }
 
@@ -167,9 +182,12 @@ fn decode(bytes: &[u8]) -> BTreeMap<String, Entity> {
     let decoder = DecoderApp::decode_eager(bytes).expect("an .rrd stream");
     for msg in decoder {
         let msg = msg.expect("a decodable message");
-        let LogMsg::ArrowMsg(_, arrow) = msg else {
+        let LogMsg::ArrowMsg(store, arrow) = msg else {
             continue;
         };
+        if store.kind() == StoreKind::Blueprint {
+            continue;
+        }
         let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk");
         // Rerun prints paths with a leading `/`; the documented scheme has none (the root stays `/`).
         let path = chunk.entity_path().to_string();
@@ -320,7 +338,10 @@ fn recording_holds_the_documented_entities() {
             &["Arrows3D:vectors", "Arrows3D:origins", "Arrows3D:colors"][..],
         ),
         (
-            format!("world/arrows/after_x{factor}_{method}"),
+            format!(
+                "world/arrows/after_x{}_{method}",
+                recording::arrow_factor_after(&study.detail.points)
+            ),
             &["Arrows3D:vectors", "Arrows3D:origins", "Arrows3D:colors"][..],
         ),
         (
@@ -375,6 +396,26 @@ fn recording_holds_the_documented_entities() {
         }
     }
     let curves = recording::learning_curves(&study);
+    // The log timeline of the curves, where the viewer opens: 1000 · log10(n).
+    for distribution in DISTRIBUTIONS {
+        let e = entity(
+            &entities,
+            &format!("curves/{region}/{}/{}", distribution.name(), METHODS[0]),
+        );
+        assert_eq!(
+            e.times["n_train_log"],
+            SIZES
+                .iter()
+                .map(|&n| recording::log_time(n))
+                .collect::<BTreeSet<_>>()
+        );
+    }
+    assert_eq!(recording::log_time(1000), 3000);
+    assert_eq!(recording::log_time(15), 1176);
+    // The robot is drawn on the curves' timelines too (its first pose), not only along `point`.
+    let link = entity(&entities, "world/robot/link_3");
+    assert_eq!(link.timeline_rows.get("n_train_log"), Some(&1));
+    assert_eq!(link.timeline_rows.get("n_train"), Some(&1));
     let failed_size = &curves[&(
         region.clone(),
         "uniform".to_string(),
@@ -404,4 +445,213 @@ fn arrow_factor_is_a_1_2_5_number_under_the_target() {
     assert_eq!(arrow_factor(&[point(0.4e-3), point(-0.9e-3)]), 100);
     assert_eq!(arrow_factor(&[point(0.3)]), 1);
     assert_eq!(arrow_factor(&[]), 1);
+}
+
+/// The chunks of the recording's data and of its blueprint, and whether a blueprint activation was sent.
+fn stores(bytes: &[u8]) -> (Vec<Chunk>, Vec<Chunk>, bool) {
+    let (mut data, mut blueprint, mut activated) = (Vec::new(), Vec::new(), false);
+    for msg in DecoderApp::decode_eager(bytes).expect("an .rrd stream") {
+        match msg.expect("a decodable message") {
+            LogMsg::ArrowMsg(store, arrow) => {
+                let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk");
+                if store.kind() == StoreKind::Blueprint {
+                    blueprint.push(chunk);
+                } else {
+                    data.push(chunk);
+                }
+            }
+            LogMsg::BlueprintActivationCommand(cmd) => activated |= cmd.make_active,
+            LogMsg::SetStoreInfo(_) => {}
+        }
+    }
+    (data, blueprint, activated)
+}
+
+/// The strings of one component over the chunks at `path` (blueprint paths have no leading `/`).
+fn texts<C>(chunks: &[Chunk], path: &str, descriptor: rerun::ComponentDescriptor) -> Vec<String>
+where
+    C: rerun::Component + std::ops::Deref<Target = rerun::external::re_sdk_types::datatypes::Utf8>,
+{
+    chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string().trim_start_matches('/') == path)
+        .flat_map(|c| {
+            c.iter_component::<C>(descriptor.component)
+                .flat_map(|batch| {
+                    batch
+                        .iter()
+                        .map(|v| v.as_str().to_string())
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn recording_opens_on_a_designed_blueprint_and_is_named_after_the_scenario() {
+    let chain = chain();
+    let study = study(&chain);
+    let bytes = recording::record(&study, &chain, "# Summary").expect("recording");
+    let (data, blueprint, activated) = stores(&bytes);
+    assert!(activated, "the blueprint is made active");
+
+    // The recording's name.
+    let names: Vec<String> = data
+        .iter()
+        .flat_map(|c| {
+            c.iter_component::<Name>(RecordingInfo::descriptor_name().component)
+                .flat_map(|b| b.iter().map(|n| n.as_str().to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(names, ["calibench study 'paper_iiwa'"]);
+
+    // Every view: its class, name, origin and entity queries.
+    let view_paths: BTreeSet<String> = blueprint
+        .iter()
+        .map(|c| {
+            c.entity_path()
+                .to_string()
+                .trim_start_matches('/')
+                .to_string()
+        })
+        .filter(|p| p.starts_with("view/") && p.matches('/').count() == 1)
+        .collect();
+    let mut views = Vec::new();
+    for path in &view_paths {
+        let class = texts::<ViewClass>(
+            &blueprint,
+            path,
+            ViewBlueprint::descriptor_class_identifier(),
+        );
+        let name = texts::<Name>(&blueprint, path, ViewBlueprint::descriptor_display_name());
+        let origin: Vec<String> = blueprint
+            .iter()
+            .filter(|c| c.entity_path().to_string().trim_start_matches('/') == path.as_str())
+            .flat_map(|c| {
+                c.iter_component::<ViewOrigin>(ViewBlueprint::descriptor_space_origin().component)
+                    .flat_map(|b| b.iter().map(|o| o.0.to_string()).collect::<Vec<_>>())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let queries = texts::<QueryExpression>(
+            &blueprint,
+            &format!("{path}/ViewContents"),
+            ViewContents::descriptor_query(),
+        );
+        assert_eq!((class.len(), name.len(), origin.len()), (1, 1, 1), "{path}");
+        views.push((
+            path.clone(),
+            class[0].clone(),
+            name[0].clone(),
+            origin[0].clone(),
+            queries,
+        ));
+    }
+    let of_class = |k: &str| views.iter().filter(|v| v.1 == k).collect::<Vec<_>>();
+
+    // One 3-D view of the world, the tracker's beams out of its query, framed on the region.
+    let spatial = of_class("3D");
+    assert_eq!(spatial.len(), 1);
+    let (path, _, _, origin, queries) = spatial[0];
+    assert_eq!(origin, "/world");
+    assert!(queries.contains(&"+ $origin/**".to_string()), "{queries:?}");
+    assert!(
+        queries.contains(&"- /world/tracker/beams".to_string()),
+        "{queries:?}"
+    );
+    let targets: Vec<[f32; 3]> = blueprint
+        .iter()
+        .filter(|c| {
+            c.entity_path().to_string().trim_start_matches('/') == format!("{path}/EyeControls3D")
+        })
+        .flat_map(|c| {
+            c.iter_component::<Position3D>(EyeControls3D::descriptor_look_target().component)
+                .flat_map(|b| b.iter().map(|p| p.0.0).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let region = &study.regions[0];
+    let centre = chain.base * Point3::from(Vector3::from(region.center_m));
+    assert_eq!(targets.len(), 1, "one camera");
+    for (k, v) in targets[0].iter().enumerate() {
+        assert!(
+            (*v as f64 - centre[k]).abs() < 1e-5,
+            "{targets:?} vs {centre}"
+        );
+    }
+
+    // One learning-curve plot per layout, each showing every method of that layout.
+    let series = of_class("TimeSeries");
+    assert_eq!(series.len(), DISTRIBUTIONS.len());
+    for d in DISTRIBUTIONS {
+        let v = series
+            .iter()
+            .find(|v| v.3 == format!("/curves/paper/{}", d.name()))
+            .unwrap_or_else(|| panic!("no curve view for {}: {series:?}", d.name()));
+        assert!(v.2.contains("(mm)") && v.2.contains("log10"), "{}", v.2);
+        assert_eq!(v.4, ["+ $origin/**"]);
+    }
+    // One histogram view per method (before and after under its origin), the summary and the legend.
+    let bars = of_class("BarChart");
+    assert_eq!(
+        bars.iter().map(|v| v.3.as_str()).collect::<BTreeSet<_>>(),
+        METHODS
+            .iter()
+            .map(|m| format!("/histograms/{m}"))
+            .collect::<BTreeSet<_>>()
+            .iter()
+            .map(String::as_str)
+            .collect()
+    );
+    let documents: BTreeSet<&str> = of_class("TextDocument")
+        .iter()
+        .map(|v| v.3.as_str())
+        .collect();
+    assert_eq!(documents, ["/legend", "/summary"].into_iter().collect());
+    assert_eq!(views.len(), 1 + DISTRIBUTIONS.len() + METHODS.len() + 2);
+
+    // Every view sits in a container under the viewport's root, and the time panel opens on the log timeline.
+    let contained: BTreeSet<String> = blueprint
+        .iter()
+        .filter(|c| {
+            c.entity_path()
+                .to_string()
+                .trim_start_matches('/')
+                .starts_with("container/")
+        })
+        .flat_map(|c| {
+            c.iter_component::<IncludedContent>(ContainerBlueprint::descriptor_contents().component)
+                .flat_map(|b| b.iter().map(|i| i.0.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .map(|p| p.trim_start_matches('/').to_string())
+        .collect();
+    for (path, ..) in &views {
+        assert!(
+            contained.contains(path),
+            "{path} is in no container: {contained:?}"
+        );
+    }
+    let roots: Vec<_> = blueprint
+        .iter()
+        .filter(|c| c.entity_path().to_string().trim_start_matches('/') == "viewport")
+        .flat_map(|c| {
+            c.iter_component::<RootContainer>(
+                ViewportBlueprint::descriptor_root_container().component,
+            )
+            .flat_map(|b| b.to_vec())
+            .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(roots.len(), 1);
+    assert_eq!(
+        texts::<TimelineName>(
+            &blueprint,
+            "time_panel",
+            TimePanelBlueprint::descriptor_timeline()
+        ),
+        ["n_train_log"]
+    );
 }

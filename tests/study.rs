@@ -290,6 +290,26 @@ fn bad_study_sections_are_refused_naming_the_field() {
     );
     refused("grid_points = 120", "grid_points = 0", &["grid_points"]);
     refused("seeds = 2", "seeds = 2\ncolour = 1", &["colour"]);
+    refused(
+        "seeds = 2",
+        "seeds = 2\ntargets_mm = []",
+        &["study.targets_mm", "empty"],
+    );
+    refused(
+        "seeds = 2",
+        "seeds = 2\ntargets_mm = [0.1, -0.2]",
+        &["study.targets_mm", "-0.2"],
+    );
+    refused(
+        "seeds = 2",
+        "seeds = 2\ntargets_mm = [0.1, 0.1]",
+        &["study.targets_mm", "twice"],
+    );
+    refused(
+        "seeds = 2",
+        "seeds = 2\nsettle_s = -1.0",
+        &["study.settle_s"],
+    );
 }
 
 #[test]

@@ -56,7 +56,12 @@ fn metrics_and_summary_do_not_depend_on_the_thread_count() {
         let o = campaign(&scenario, out, threads);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     }
-    for file in ["metrics.csv", "summary.md", "measurements.csv"] {
+    for file in [
+        "metrics.csv",
+        "summary.md",
+        "answer.csv",
+        "measurements.csv",
+    ] {
         assert_eq!(
             read(&one.join(file)),
             read(&two.join(file)),
@@ -64,6 +69,13 @@ fn metrics_and_summary_do_not_depend_on_the_thread_count() {
         );
     }
     let metrics = String::from_utf8(read(&one.join("metrics.csv"))).unwrap();
+    // The answer of a real (small) study, recomputed from its metrics.csv.
+    crate::answer::check(
+        &metrics,
+        &String::from_utf8(read(&one.join("answer.csv"))).unwrap(),
+        &String::from_utf8(read(&one.join("summary.md"))).unwrap(),
+        &[0.5, 0.3, 0.2, 0.1, 0.05],
+    );
     // 1 region × 2 layouts × 3 methods × 2 sizes × 2 seeds, plus the header.
     assert_eq!(metrics.lines().count(), 1 + 24);
     for name in [

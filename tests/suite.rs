@@ -5,6 +5,7 @@
 mod common;
 
 mod bad_inputs;
+mod answer;
 mod calibrate;
 mod calibrate_cli;
 mod campaign;

@@ -453,3 +453,23 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         out: out.clone(),
     })
 }
+
+/// `calibrate --method`'s values, each with what the method is, as `--help` lists them.
+pub fn method_values() -> clap::builder::PossibleValuesParser {
+    use clap::builder::PossibleValue;
+    clap::builder::PossibleValuesParser::new(
+        MethodKind::ALL.map(|m| PossibleValue::new(m.name()).help(m.info().summary)),
+    )
+}
+
+/// `calibrate --test-registration`'s values.
+pub fn registration_values() -> clap::builder::PossibleValuesParser {
+    use clap::builder::PossibleValue;
+    clap::builder::PossibleValuesParser::new([
+        PossibleValue::new("refit").help(
+            "the test campaign's tracker frame and probe mounting, registered on its own points (another \
+             station, another day)",
+        ),
+        PossibleValue::new("model").help("the model's registration (same station and probe)"),
+    ])
+}

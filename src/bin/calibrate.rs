@@ -58,9 +58,8 @@ struct FitArgs {
     /// The mapping of `--test-data` [default: `--mapping`].
     #[arg(long)]
     test_mapping: Option<PathBuf>,
-    /// refit: register the test campaign's tracker frame and probe mounting on its own points (another
-    /// station, another day); model: use the model's registration (same station and probe).
-    #[arg(long, default_value = "refit")]
+    /// How the test campaign is registered.
+    #[arg(long, default_value = "refit", value_parser = calibrate::registration_values())]
     test_registration: String,
     /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
     #[arg(long)]
@@ -71,9 +70,8 @@ struct FitArgs {
     /// The link carrying the reflectors [default: the chain's last link].
     #[arg(long)]
     flange_link: Option<String>,
-    /// nominal | paper-rotz | paper-rotxyz | paper-rotxyz-transxyz | kinematic | elastic | residual-ridge |
-    /// hybrid | hybrid-kinematic
-    #[arg(long, default_value = "paper-rotxyz")]
+    /// The calibration method.
+    #[arg(long, default_value = "paper-rotxyz", value_parser = calibrate::method_values())]
     method: String,
     /// Mass on the flange (kg), for the gravity torques of the elastic methods.
     #[arg(long, default_value_t = 0.0)]

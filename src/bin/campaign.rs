@@ -125,7 +125,16 @@ fn print(done: &CampaignRun) {
             s.mean, s.std, s.max, s.rms, s.p95
         );
     };
-    println!("distance errors of the reflector (or nest centre) after rigid registration (mm):");
+    if done.study.is_some() {
+        println!(
+            "the scenario's own campaign before calibration (not the study's answer, which follows), distance \
+             errors after rigid registration (mm):"
+        );
+    } else {
+        println!(
+            "distance errors of the reflector (or nest centre) after rigid registration (mm):"
+        );
+    }
     row("measured (paper's Table 1 column)", &done.measured);
     row("true, all systematic errors", &done.budget.all_systematic);
     row("true, elastic deflection only", &done.budget.elastic_only);
@@ -163,12 +172,13 @@ fn print(done: &CampaignRun) {
     if let Some((study, took)) = &done.study {
         let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
         println!(
-            "study: {} runs ({} failed, reasons in metrics.csv) in {:.1} s; see summary.md, plots/ and campaign.rrd \
-             (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
+            "study: {} runs ({} failed, reasons in metrics.csv) in {:.1} s; see summary.md, answer.csv, plots/ and \
+             campaign.rrd (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
             study.runs.len(),
             failed,
             took.as_secs_f64()
         );
+        print!("{}", calibench::report::answer::answer_text(study));
     }
     println!("wrote {}", done.out.display());
 }

@@ -169,6 +169,8 @@ pub(super) struct Work {
     pub(super) state: TrueState,
 }
 
+/// The points of one region and its candidate counts.
+pub(super) type RegionPoints = (Vec<Stop>, Rejections);
 impl Generator<'_> {
     /// Generates the campaign over all regions; points are numbered from 0 in region order, which is the order
     /// the arm visits them in. Each region's layout, inverse kinematics and feasibility choose its points; the
@@ -196,6 +198,19 @@ impl Generator<'_> {
         region: &RegionConfig,
         collision: &CollisionModel,
     ) -> Result<(Vec<Stop>, Rejections)> {
+        let selectors: Vec<&dyn Selector> = self.selector.into_iter().collect();
+        self.region_for(r, region, collision, &selectors)?.remove(0)
+    }
+
+    /// The points of one region: for a model-based layout, one choice per selector from the shared pool (an
+    /// error when there is none); otherwise one set.
+    pub(super) fn region_for(
+        &self,
+        r: u64,
+        region: &RegionConfig,
+        collision: &CollisionModel,
+        selectors: &[&dyn Selector],
+    ) -> Result<Vec<Result<RegionPoints>>> {
         let anchor = self.anchor(region)?;
         let want = region.points;
         let selects = region.distribution.selects();
@@ -216,9 +231,22 @@ impl Generator<'_> {
                 self.candidates(r, attempt, region, &anchor, &unit, collision)?;
             last = counts;
             if accepted.len() >= want && selects {
-                let kept = self.select(region, accepted, want)?;
-                last.used = kept.len();
-                return Ok((kept, last));
+                if selectors.is_empty() {
+                    return Err(Error::Invalid(format!(
+                        "region '{}': layout '{}' chooses its points for a model, and no model was given",
+                        region.name,
+                        region.distribution.name()
+                    )));
+                }
+                return Ok(selectors
+                    .iter()
+                    .map(|selector| {
+                        let kept = self.select(region, *selector, &accepted, want)?;
+                        let mut counts = last.clone();
+                        counts.used = kept.len();
+                        Ok((kept, counts))
+                    })
+                    .collect());
             }
             if accepted.len() >= want {
                 let k = accepted.len();
@@ -231,7 +259,7 @@ impl Generator<'_> {
                     }
                 }
                 last.used = kept.len();
-                return Ok((kept, last));
+                return Ok(vec![Ok((kept, last))]);
             }
             let rate = accepted.len() as f64 / unit.len().max(1) as f64;
             if accepted.is_empty() && unit.len() >= 4 * want {
@@ -259,21 +287,24 @@ impl Generator<'_> {
         )))
     }
 
-    /// The `want` feasible points of `pool` that a model-based layout chooses, in pool order.
-    fn select(&self, region: &RegionConfig, pool: Vec<Stop>, want: usize) -> Result<Vec<Stop>> {
-        let selector = self.selector.ok_or_else(|| {
-            Error::Invalid(format!(
-                "region '{}': layout '{}' chooses its points for a model, and no model was given",
-                region.name,
-                region.distribution.name()
-            ))
-        })?;
+    /// The `want` feasible points of `pool` that `selector` chooses, in pool order.
+    fn select(
+        &self,
+        region: &RegionConfig,
+        selector: &dyn Selector,
+        pool: &[Stop],
+        want: usize,
+    ) -> Result<Vec<Stop>> {
         let commands: Vec<&[f64]> = pool.iter().map(|p| p.q_cmd.as_slice()).collect();
-        let chosen = selector
+        let mut chosen = selector
             .choose(&commands, want)
             .map_err(|e| Error::Unreachable(format!("region '{}': {}", region.name, e.detail())))?;
-        let mut pool: Vec<Option<Stop>> = pool.into_iter().map(Some).collect();
-        Ok(chosen.into_iter().filter_map(|i| pool[i].take()).collect())
+        chosen.sort_unstable();
+        chosen.dedup();
+        Ok(chosen
+            .into_iter()
+            .filter_map(|i| pool.get(i).cloned())
+            .collect())
     }
 
     /// The feasible candidates of one attempt, as the visits that would measure them, in layout order.

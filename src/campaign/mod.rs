@@ -5,6 +5,7 @@
 pub mod distribution;
 pub mod generate;
 pub mod region;
+mod selected;
 pub mod sequence;
 
 pub use distribution::{DistributionKind, PointDistribution};

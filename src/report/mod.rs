@@ -1,8 +1,11 @@
-//! The report of a study: `metrics.csv` (one tidy row per run) and `outside.csv` ([`metrics`]), `summary.md`
+//! The report of a study: `metrics.csv` (one tidy row per run) and `outside.csv` ([`metrics`]), the answer
+//! to the planning question (`answer.csv`, [`answer`]), `summary.md`
 //! (text and tables a person reads: [`summary`], [`tables`]) from the aggregates over seeds ([`aggregate`]), PNG
 //! plots, and the rerun recording `campaign.rrd`. Millimetres in everything a person reads.
 
 pub mod aggregate;
+pub mod answer;
+pub mod blueprint;
 pub mod metrics;
 pub mod plots;
 pub mod recording;
@@ -14,12 +17,14 @@ use crate::robot::Chain;
 use crate::study::StudyResult;
 
 /// Every file of a study's report (name, bytes), in the order they are written: `metrics.csv`, `outside.csv`,
+/// `answer.csv`,
 /// the plots, `campaign.rrd` (the robot drawn from `chain`) and `summary.md`.
 pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Vec<u8>)>> {
     let summary = summary::summary_md(study)?;
     let mut files = vec![
         ("metrics.csv".to_string(), metrics::metrics_csv(study)?),
         ("outside.csv".to_string(), metrics::outside_csv(study)?),
+        ("answer.csv".to_string(), answer::answer_csv(study)?),
     ];
     files.extend(plots::learning_curves_png(study)?);
     files.extend(plots::histograms_png(study)?);

@@ -60,7 +60,7 @@ fn render(
 }
 
 /// A name safe as a file name: letters, digits, `-`, `_` and `.` kept, anything else `_`.
-fn file_safe(s: &str) -> String {
+pub(super) fn file_safe(s: &str) -> String {
     s.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
@@ -113,7 +113,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
         }
         let cols = layouts.len().min(2);
         let rows = layouts.len().div_ceil(cols);
-        let (pw, ph) = (960u32, 680u32);
+        let (pw, ph) = (1045u32, 680u32);
         let name = format!("plots/learning_curves_{}.png", file_safe(region));
         let png = render(&name, (pw * cols as u32, ph * rows as u32), |root| {
             let panels = root.split_evenly((rows, cols));
@@ -151,12 +151,47 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
     Ok(out)
 }
 
+/// Width of the legend column right of each learning-curve panel (px): outside the plot, so it hides no curve.
+const LEGEND_WIDTH: u32 = 275;
+
+/// A hybrid (a method correcting another listed one) is drawn dashed: its curve often lies on its base's.
+fn dashed(method: &str) -> bool {
+    crate::calib::registry::MethodKind::parse(method).is_ok_and(|k| k.info().base.is_some())
+}
+
+/// A line from `a` to `b`, solid or in dashes of 8 px with 6 px gaps.
+fn line(points: &[(i32, i32)], style: ShapeStyle, dash: bool) -> Vec<PathElement<(i32, i32)>> {
+    if !dash {
+        return vec![PathElement::new(points.to_vec(), style)];
+    }
+    let mut out = Vec::new();
+    for w in points.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let length = (((b.0 - a.0).pow(2) + (b.1 - a.1).pow(2)) as f64).sqrt();
+        let mut t = 0.0;
+        while t < length {
+            let end = (t + 8.0).min(length);
+            let at = |s: f64| {
+                (
+                    a.0 + ((b.0 - a.0) as f64 * s / length).round() as i32,
+                    a.1 + ((b.1 - a.1) as f64 * s / length).round() as i32,
+                )
+            };
+            out.push(PathElement::new(vec![at(t), at(end)], style));
+            t += 14.0;
+        }
+    }
+    out
+}
+
 fn learning_panel(
-    panel: &DrawingArea<BitMapBackend, Shift>,
+    whole: &DrawingArea<BitMapBackend, Shift>,
     title: &str,
     curves: &[(usize, &Curve)],
     floor: &[(f64, f64)],
 ) -> Drawn {
+    let (width, _) = whole.dim_in_pixel();
+    let (panel, legend) = whole.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
     let mut xs: Vec<f64> = Vec::new();
     let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
     for (_, c) in curves {
@@ -171,7 +206,7 @@ fn learning_panel(
     ys.retain(|y| y.is_finite() && *y > 0.0);
     xs.retain(|x| *x > 0.0);
     if xs.is_empty() || ys.is_empty() {
-        panel.titled(&format!("{title}: no successful run"), (FAMILY, 26))?;
+        whole.titled(&format!("{title}: no successful run"), (FAMILY, 26))?;
         return Ok(());
     }
     let (x0, x1) = min_max(&xs);
@@ -191,7 +226,7 @@ fn learning_panel(
     };
     let bold = ticks(&[1.0, 2.0, 5.0]);
     let light = ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
-    let mut chart = ChartBuilder::on(panel)
+    let mut chart = ChartBuilder::on(&panel)
         .caption(title, (FAMILY, 26))
         .margin(16)
         .x_label_area_size(56)
@@ -244,13 +279,12 @@ fn learning_panel(
                 col.stroke_width(2),
             )))?;
         }
-        chart
-            .draw_series(LineSeries::new(
-                band.iter().map(|p| (p.0, p.2)),
-                col.stroke_width(3),
-            ))?
-            .label(c.method.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(3)));
+        let median: Vec<(f64, f64)> = band.iter().map(|p| (p.0, p.2)).collect();
+        if dashed(&c.method) {
+            chart.draw_series(DashedLineSeries::new(median, 10, 6, col.stroke_width(3)))?;
+        } else {
+            chart.draw_series(LineSeries::new(median, col.stroke_width(3)))?;
+        }
         chart.draw_series(
             band.iter()
                 .map(|p| Circle::new((p.0, p.2), 4, col.filled())),
@@ -262,18 +296,23 @@ fn learning_panel(
         } else {
             floor.to_vec()
         };
-        chart
-            .draw_series(DashedLineSeries::new(line, 8, 6, BLACK.stroke_width(2)))?
-            .label("floor (oracle), dashed")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(2)));
+        chart.draw_series(DashedLineSeries::new(line, 8, 6, BLACK.stroke_width(2)))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FAMILY, 17))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()?;
+    // The legend, in its own column: each swatch drawn as its line is (hybrids and the floor dashed).
+    let mut entries: Vec<(String, RGBColor, u32, bool)> = curves
+        .iter()
+        .map(|&(i, c)| (c.method.clone(), colour(i), 3, dashed(&c.method)))
+        .collect();
+    if !floor.is_empty() {
+        entries.push(("floor (oracle)".into(), BLACK, 2, true));
+    }
+    for (k, (label, col, width, dash)) in entries.into_iter().enumerate() {
+        let y = 70 + 28 * k as i32;
+        for segment in line(&[(8, y), (44, y)], col.stroke_width(width), dash) {
+            legend.draw(&segment)?;
+        }
+        legend.draw(&Text::new(label, (52, y - 10), (FAMILY, 17)))?;
+    }
     Ok(())
 }
 

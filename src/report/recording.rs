@@ -2,14 +2,18 @@
 //! (`pip install "rerun-sdk==0.36.*"`, then `rerun results/<scenario>/campaign.rrd`).
 //!
 //! Everything is in metres, in the world frame, Z up ([`ViewCoordinates::RIGHT_HAND_Z_UP`] logged statically at
-//! the root). The wall-clock `log_time` timeline is off and the recording id is fixed (`calibench-<scenario>`),
-//! so two runs of the same scenario give recordings that `rerun rrd compare --unordered` finds equal.
+//! the root). The wall-clock `log_time` timeline is off and the recording id is fixed (`calibench-<scenario>`);
+//! the recording is named `calibench study '<scenario>'`. It carries its blueprint (the viewer's layout, made
+//! active when it opens: [`super::blueprint`]).
 //!
 //! # Timelines
 //!
 //! * `point` (sequence): the index of the detail campaign's point; the robot is drawn at that point.
 //! * `n_train` (sequence): the training-set size of the learning curves.
+//! * `n_train_log` (sequence): the same sizes as round(1000 · log10 n) — a log axis for the curves, on which the
+//!   viewer opens (2000 = 100 points, 3000 = 1000).
 //!
+//! The robot's first pose is also logged at time 0 of both `n_train` timelines, so it stays drawn there.
 //! Everything else is static.
 //!
 //! # Entity paths
@@ -20,7 +24,7 @@
 //! | path | archetypes | timeline, rows |
 //! |---|---|---|
 //! | `/` | `ViewCoordinates` (right-handed, Z up) | static |
-//! | `world/robot/link_<i>` | `Transform3D` (world ← body `i`, nominal FK at `q_cmd`; body 0 is the base) | `point`, one row per detail point |
+//! | `world/robot/link_<i>` | `Transform3D` (world ← body `i`, nominal FK at `q_cmd`; body 0 is the base) | `point`, one row per detail point; `n_train` and `n_train_log`, one row (the first point) |
 //! | `world/robot/link_<i>/cylinders` | `Cylinders3D`, the body's cylinder colliders in its frame | static |
 //! | `world/robot/link_<i>/capsules` | `Capsules3D` | static |
 //! | `world/robot/link_<i>/spheres` | `Ellipsoids3D` | static |
@@ -33,24 +37,25 @@
 //! | `world/tracker/beam` | `LineStrips3D`, the beam to the current point | `point` |
 //! | `world/points/before` | `Points3D` at the true positions, coloured by \|error before\| | static |
 //! | `world/arrows/before_x<f>` | `Arrows3D`, error before calibration × `f` | static |
-//! | `world/arrows/after_x<f>_<method>` | `Arrows3D`, error after the detail method × `f` | static |
+//! | `world/arrows/after_x<g>_<method>` | `Arrows3D`, error after the detail method × `g` (its own factor) | static |
 //! | `world/grid/<method>` | `Points3D`, the ground-truth grid coloured by the detail method's residual | static |
 //! | `histograms/<method>/before`, `histograms/<method>/after` | `BarChart` (counts; abscissa = bin centres, mm) | static |
-//! | `curves/<region>/<distribution>/<method>` | `SeriesLines` (named `<method> <distribution>`, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train`, one row per size with an OK seed |
+//! | `curves/<region>/<distribution>/<method>` | `SeriesLines` (named `<method> (mm)`, coloured as in the PNG, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train` and `n_train_log`, one row per size with an OK seed |
 //! | `legend` | `TextDocument` (markdown): the colour scales and the arrow factor | static |
 //! | `summary` | `TextDocument` (markdown): the study summary | static |
 //!
 //! # Colours
 //!
 //! Errors map linearly onto the viridis colormap (dark purple = 0 → yellow = top of scale), in millimetres.
-//! The measured points and both arrow sets share one scale, the largest error before calibration rounded up in
-//! the 1-2-5 sequence (so the after arrows look dark next to the before ones); the residual grid has its own scale,
-//! its largest residual rounded up the same way. The `legend` document states both scales.
+//! The measured points and the before arrows share one scale, the largest error before calibration rounded up in
+//! the 1-2-5 sequence; the after arrows and the residual grid have their own scales, their largest values rounded
+//! up the same way. The `legend` document states every scale.
 //!
 //! # Arrow magnification
 //!
 //! The arrow factor `f` is the largest 1-2-5 number (at least 1) that keeps the longest error-before arrow under
-//! 0.1 m; both arrow sets use it, and it is part of their entity paths ([`arrow_factor`]).
+//! 0.1 m ([`arrow_factor`]); the after arrows get their own factor `g` the same way ([`arrow_factor_after`]) —
+//! at `f`, a calibrated arm's arrows would be invisible. Both factors are part of the entity paths.
 
 use std::collections::BTreeMap;
 
@@ -72,6 +77,14 @@ pub const APPLICATION_ID: &str = "calibench";
 pub const POINT_TIMELINE: &str = "point";
 /// The sequence timeline of the learning curves.
 pub const N_TRAIN_TIMELINE: &str = "n_train";
+/// The learning curves' log timeline: round(1000 · log10 n_train), so 2000 is 100 points and 3000 is 1000; the
+/// viewer opens on it.
+pub const N_TRAIN_LOG_TIMELINE: &str = "n_train_log";
+
+/// The position of `n` training points on [`N_TRAIN_LOG_TIMELINE`].
+pub fn log_time(n: usize) -> i64 {
+    (1000.0 * (n.max(1) as f64).log10()).round() as i64
+}
 /// Bins of every histogram.
 pub const HISTOGRAM_BINS: usize = 20;
 
@@ -83,8 +96,12 @@ const ARROW_TARGET_M: f64 = 0.1;
 /// The recording goes to an in-memory sink (`RecordingStreamBuilder::memory`) and is encoded at the end, so the
 /// caller writes the file atomically and a failed study leaves no partial recording behind.
 pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Result<Vec<u8>> {
+    let name = sanitize(&study.world.name);
     let (rec, storage) = RecordingStreamBuilder::new(APPLICATION_ID)
-        .recording_id(format!("calibench-{}", sanitize(&study.world.name)))
+        .recording_id(format!("calibench-{name}"))
+        // Named after the scenario, which the viewer shows in its recording list.
+        .recording_name(format!("calibench study '{}'", study.world.name))
+        .send_properties(true)
         // Forced on: the recording is an output of the harness, whatever the `RERUN` environment says.
         .enabled(true)
         .memory()
@@ -93,6 +110,12 @@ pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Res
     rec.set_log_tick_enabled(false);
 
     log_all(&rec, study, chain, summary_markdown)?;
+    super::blueprint::send(
+        &rec,
+        APPLICATION_ID,
+        &name,
+        &super::blueprint::study_layout(study, chain),
+    )?;
 
     let bytes = storage.drain_as_bytes().map_err(rerun_error)?;
     Ok(bytes)
@@ -119,6 +142,19 @@ pub fn arrow_factor(points: &[DetailPoint]) -> u64 {
         .find(|m| m * decade <= wanted * (1.0 + 1e-12))
         .unwrap_or(1.0);
     (mantissa * decade).round().clamp(1.0, 1e9) as u64
+}
+
+/// The magnification of the error-after arrows: as [`arrow_factor`], on the errors after calibration, so that
+/// they are as visible as the ones before (at the before factor, a calibrated arm's arrows vanish).
+pub fn arrow_factor_after(points: &[DetailPoint]) -> u64 {
+    let swapped: Vec<DetailPoint> = points
+        .iter()
+        .map(|p| DetailPoint {
+            error_before: p.error_after,
+            ..p.clone()
+        })
+        .collect();
+    arrow_factor(&swapped)
 }
 
 /// A scenario name as one entity-path part: `[A-Za-z0-9_.-]` kept, anything else `_`.
@@ -176,7 +212,7 @@ fn nice_ceiling(value: f64) -> f64 {
         .unwrap_or(10.0 * decade)
 }
 
-fn rerun_error(e: impl std::fmt::Display) -> Error {
+pub(super) fn rerun_error(e: impl std::fmt::Display) -> Error {
     Error::io(
         "campaign.rrd",
         std::io::Error::other(format!("rerun recording: {e}")),
@@ -204,9 +240,9 @@ fn mm(m: f64) -> f64 {
     m * 1e3
 }
 
-/// A distinct colour per series index.
-fn palette(i: usize) -> [u8; 4] {
-    const COLORS: [[u8; 4]; 8] = [
+/// A distinct colour per series index: Tableau's ten, as the PNG plots use.
+pub(super) fn palette(i: usize) -> [u8; 4] {
+    const TAB10: [[u8; 4]; 10] = [
         [31, 119, 180, 255],
         [255, 127, 14, 255],
         [44, 160, 44, 255],
@@ -215,8 +251,10 @@ fn palette(i: usize) -> [u8; 4] {
         [140, 86, 75, 255],
         [227, 119, 194, 255],
         [127, 127, 127, 255],
+        [188, 189, 34, 255],
+        [23, 190, 207, 255],
     ];
-    COLORS[i % COLORS.len()]
+    TAB10[i % TAB10.len()]
 }
 
 fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &str) -> Result<()> {
@@ -239,21 +277,37 @@ fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &
             .fold(0.0, f64::max),
     );
     let factor = arrow_factor(&detail.points);
+    let after_factor = arrow_factor_after(&detail.points);
+    let after_scale_mm = nice_ceiling(
+        detail
+            .points
+            .iter()
+            .map(|p| mm(p.error_after.norm()))
+            .fold(0.0, f64::max),
+    );
 
     log_robot(rec, study, chain)?;
     log_regions(rec, study, chain)?;
     log_tracker(rec, study)?;
-    log_points(rec, study, before_scale_mm, grid_scale_mm, factor)?;
+    log_points(
+        rec,
+        study,
+        [before_scale_mm, after_scale_mm, grid_scale_mm],
+        [factor, after_factor],
+    )?;
     log_histograms(rec, study)?;
     log_curves(rec, study)?;
 
     let legend = format!(
         "# Legend\n\n\
          * Colormap: viridis, linear, dark purple = 0 mm, yellow = top of scale.\n\
-         * Measured points (`world/points/before`) and error arrows (`world/arrows/…`): 0 – {before_scale_mm} mm \
-         (|error before calibration|, resp. |error after|).\n\
+         * Measured points (`world/points/before`) and the arrows of the error before calibration \
+         (`world/arrows/before_x{factor}`, magnified ×{factor}): 0 – {before_scale_mm} mm.\n\
+         * Arrows of the error after `{method}` (`world/arrows/after_x{after_factor}_{method}`, magnified \
+         ×{after_factor}, so they show): 0 – {after_scale_mm} mm.\n\
          * Ground-truth grid (`world/grid/{method}`): 0 – {grid_scale_mm} mm (residual of `{method}`).\n\
-         * Arrows magnified ×{factor}.\n\
+         * Learning curves: the x axis is the `{N_TRAIN_LOG_TIMELINE}` timeline, 1000 · log10(training points): \
+         1000 = 10, 2000 = 100, 3000 = 1000 points (the `{N_TRAIN_TIMELINE}` timeline has the plain counts).\n\
          * Robot drawn with the nominal model at each point's commanded joints (timeline `point`).\n",
         method = sanitize(&detail.method),
     );
@@ -360,6 +414,17 @@ fn log_robot(rec: &RecordingStream, study: &StudyResult, chain: &Chain) -> Resul
             )));
         }
         forward_kinematics(chain, &point.q_cmd, &mut frames);
+        if k == 0 {
+            // The first pose on the curves' timelines too, so the robot stays drawn there.
+            rec.reset_time();
+            rec.set_time_sequence(N_TRAIN_TIMELINE, 0);
+            rec.set_time_sequence(N_TRAIN_LOG_TIMELINE, 0);
+            for (i, body) in frames.body.iter().enumerate() {
+                rec.log(format!("world/robot/link_{i}"), &transform(body))
+                    .map_err(rerun_error)?;
+            }
+            rec.reset_time();
+        }
         rec.set_time_sequence(POINT_TIMELINE, k as i64);
         for (i, body) in frames.body.iter().enumerate() {
             rec.log(format!("world/robot/link_{i}"), &transform(body))
@@ -449,9 +514,8 @@ fn log_tracker(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
 fn log_points(
     rec: &RecordingStream,
     study: &StudyResult,
-    before_scale_mm: f64,
-    grid_scale_mm: f64,
-    factor: u64,
+    [before_scale_mm, after_scale_mm, grid_scale_mm]: [f64; 3],
+    [factor, after_factor]: [u64; 2],
 ) -> Result<()> {
     let detail = &study.detail;
     let positions: Vec<[f32; 3]> = detail.points.iter().map(|p| p3(&p.true_position)).collect();
@@ -477,15 +541,19 @@ fn log_points(
             .with_radii([0.002f32]),
     )
     .map_err(rerun_error)?;
+    let g = after_factor as f64;
     rec.log_static(
-        format!("world/arrows/after_x{factor}_{}", sanitize(&detail.method)),
-        &Arrows3D::from_vectors(detail.points.iter().map(|p| f3(&(p.error_after * f))))
+        format!(
+            "world/arrows/after_x{after_factor}_{}",
+            sanitize(&detail.method)
+        ),
+        &Arrows3D::from_vectors(detail.points.iter().map(|p| f3(&(p.error_after * g))))
             .with_origins(positions)
             .with_colors(
                 detail
                     .points
                     .iter()
-                    .map(|p| viridis(mm(p.error_after.norm()), before_scale_mm))
+                    .map(|p| viridis(mm(p.error_after.norm()), after_scale_mm))
                     .collect::<Vec<_>>(),
             )
             .with_radii([0.002f32]),
@@ -523,8 +591,8 @@ fn log_histograms(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
         .collect();
     for (method, ba) in histograms {
         for (side, values, color) in [
-            ("before", &ba.before, [200, 80, 60, 255]),
-            ("after", &ba.after, [60, 120, 200, 255]),
+            ("before", &ba.before, [214, 39, 40, 150]),
+            ("after", &ba.after, [31, 119, 180, 150]),
         ] {
             let mut counts = vec![0u32; HISTOGRAM_BINS];
             for v in values.iter().filter(|v| v.is_finite()) {
@@ -592,25 +660,22 @@ pub fn learning_curves(
 
 fn log_curves(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
     let curves = learning_curves(study);
-    let methods: Vec<&String> = {
-        let mut m: Vec<&String> = curves.keys().map(|k| &k.2).collect();
-        m.sort();
-        m.dedup();
-        m
-    };
+    // Colours by the study's method order, the PNG's.
+    let methods: Vec<String> = study.config.methods.iter().map(|m| sanitize(m)).collect();
     for ((region, distribution, method), points) in &curves {
         let path = format!("curves/{region}/{distribution}/{method}");
-        let color = palette(methods.iter().position(|m| *m == method).unwrap_or(0));
+        let color = palette(methods.iter().position(|m| m == method).unwrap_or(0));
         rec.log_static(
             path.as_str(),
             &SeriesLines::new()
-                .with_names([format!("{method} {distribution}")])
+                .with_names([format!("{method} (mm)")])
                 .with_colors([color])
                 .with_widths([2.0f32]),
         )
         .map_err(rerun_error)?;
         for &(n, value) in points {
             rec.set_time_sequence(N_TRAIN_TIMELINE, n as i64);
+            rec.set_time_sequence(N_TRAIN_LOG_TIMELINE, log_time(n));
             rec.log(path.as_str(), &Scalars::single(value))
                 .map_err(rerun_error)?;
         }

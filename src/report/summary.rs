@@ -1,5 +1,6 @@
-//! `summary.md`: the text a person reads. The scenario in words, the tables ([`super::tables`]), the
-//! observability of each model and a verdict per method. Every number is an aggregate
+//! `summary.md`: the text a person reads, top-down: the answer ([`super::answer`]), the learning curves and a
+//! verdict per method, then the details — the scenario in words, the tables ([`super::tables`]) and the
+//! observability of each model. Every number is an aggregate
 //! ([`super::aggregate`]) of `metrics.csv`'s written values ([`super::metrics`]), so parsing `metrics.csv`
 //! and aggregating again gives the summary's numbers to the last digit; the aggregation helpers are public
 //! for that check.
@@ -11,13 +12,14 @@ use crate::error::{Error, Result};
 use crate::study::{RunMetrics, StudyResult};
 
 use super::aggregate::{
-    Axes, Curve, FLOOR_FACTOR, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau,
-    points_needed,
+    Axes, Curve, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
 };
+use super::answer::{Answer, STATISTICS, answer_md, answers, fmt_target};
 use super::metrics::rounded;
+use super::plots::file_safe;
 use super::tables::{
-    accuracy_tables, best_accuracy_md, fmt_mm, fmt_points_needed, learning_curve_tables,
-    outside_md, points_needed_tables, table_header,
+    accuracy_tables, compact_curves_md, fmt_mm, learning_curve_tables, outside_md, table_header,
+    worse_md,
 };
 
 /// `metrics.csv` and `outside.csv`, for the callers that write a study's three files from here.
@@ -44,7 +46,7 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
     );
     let t = &s.truth;
     let k = &s.tracker;
-    let _ = writeln!(out, "## The scenario\n");
+    let _ = writeln!(out, "### The scenario\n");
     let _ = writeln!(
         out,
         "- **Robot:** `{robot}` (`{}`), carrying {} kg on the flange. The true robot differs from its nominal \
@@ -144,14 +146,10 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
     );
 }
 
-/// Sentence fragments of the verdict for one method in one region.
-fn verdict(
-    method: &str,
-    curves: &[&Curve],
-    study: &StudyResult,
-    region: &str,
-    largest: usize,
-) -> String {
+/// The verdict for one method in one region: where its curve ends, whether more points would help, and the
+/// smallest target it reaches.
+fn verdict(method: &str, curves: &[&Curve], study: &StudyResult, answers: &[Answer]) -> String {
+    let region = curves.first().map_or("", |c| c.region.as_str());
     let runs: Vec<&RunMetrics> = study
         .runs
         .iter()
@@ -177,69 +175,7 @@ fn verdict(
     if failed.len() == runs.len() {
         return format!("**{method}**: every run failed — no result.{failures}");
     }
-    if method == "nominal" {
-        // No calibration: the starting point every method is measured against.
-        let last = curves
-            .iter()
-            .filter_map(|c| c.points.iter().rev().find(|p| p.truth.is_some()))
-            .next();
-        if let Some(p) = last {
-            let t = p.truth.expect("found with a value").median;
-            let ratio = p
-                .floor
-                .filter(|f| f.median > 0.0)
-                .map(|f| format!(", {:.1}× the floor", t / f.median))
-                .unwrap_or_default();
-            return format!(
-                "**{method}**: no calibration — ground-truth mean {} mm{ratio}; what every method starts \
-                 from.{failures}",
-                fmt_mm(t)
-            );
-        }
-    }
-    // Reached: the layout needing the fewest points (ties: the lower plateau).
-    let mut reached: Vec<(usize, f64, &Curve)> = curves
-        .iter()
-        .filter_map(|c| Some((points_needed(&c.points)?, plateau(&c.points)?, *c)))
-        .collect();
-    reached.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
-    let others = |best: DistributionKind| -> String {
-        let rest: Vec<String> = curves
-            .iter()
-            .filter(|c| c.distribution != best)
-            .map(|c| {
-                format!(
-                    "{}: {}",
-                    c.distribution.name(),
-                    fmt_points_needed(&c.points)
-                )
-            })
-            .collect();
-        if rest.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", rest.join("; "))
-        }
-    };
-    if let Some(&(n, _, c)) = reached.first() {
-        let p = c
-            .points
-            .iter()
-            .find(|p| p.n_train == n)
-            .expect("the size exists");
-        let t = p.truth.expect("reached implies a value").median;
-        let f = p.floor.expect("reached implies a floor").median;
-        return format!(
-            "**{method}**: reaches the floor from **{n} points** with {} — ground-truth mean {} mm against a \
-             floor of {} mm ({:.2}×){}. Fewer points cost accuracy; more buy little.{failures}",
-            c.distribution.name(),
-            fmt_mm(t),
-            fmt_mm(f),
-            t / f,
-            others(c.distribution),
-        );
-    }
-    // Not reached: describe the best layout at its largest size.
+    // The best layout: the lowest median at the largest size with a result.
     let best = curves
         .iter()
         .filter_map(|c| {
@@ -250,39 +186,120 @@ fn verdict(
     let Some((t, c, last)) = best else {
         return format!("**{method}**: no ground-truth result.{failures}");
     };
-    let floor = last.floor.map(|f| f.median);
-    let ratio = floor
-        .filter(|f| *f > 0.0)
-        .map(|f| format!(", {:.1}× the floor ({} mm)", t / f, fmt_mm(f)))
-        .unwrap_or_default();
+    if method == "nominal" {
+        // No calibration: the starting point every method is measured against.
+        return format!(
+            "**{method}**: no calibration — ground-truth mean {} mm; what every method starts from.{failures}",
+            fmt_mm(t)
+        );
+    }
     let previous = c
         .points
         .iter()
         .rev()
         .filter(|p| p.n_train < last.n_train)
         .find_map(|p| p.truth.map(|s| (p.n_train, s.median)));
-    let at = if last.n_train == largest {
-        String::new()
-    } else {
-        " (the largest size with a result)".to_string()
-    };
-    match previous {
+    let curve = match previous {
         Some((n0, t0)) if t0 > (1.0 + PLATEAU_TOLERANCE) * t => format!(
-            "**{method}**: still improving at {} points{at} with {} — {} mm, down from {} mm at {n0}{ratio}; more \
-             points may help, but it does not reach {FLOOR_FACTOR}× the floor in this study.{failures}",
+            "still improving at {} points with {} — {} mm, down from {} mm at {n0}; more points would help",
             last.n_train,
             c.distribution.name(),
             fmt_mm(t),
             fmt_mm(t0),
         ),
         _ => format!(
-            "**{method}**: plateaus at {} mm (best layout {}, {} points{at}){ratio} — more points do not help; \
-             the model itself is the limit.{failures}",
+            "levels off at {} mm (best layout {}, within {} % from {} points) — more points do not help; its \
+             model is the limit",
             fmt_mm(t),
             c.distribution.name(),
-            last.n_train,
+            PLATEAU_TOLERANCE * 100.0,
+            plateau_from(&c.points).map_or("—".to_string(), |n| n.to_string()),
         ),
-    }
+    };
+    let reached = answers
+        .iter()
+        .filter(|x| x.region == region && x.statistic == STATISTICS[0].0)
+        .filter_map(|x| Some((x.target_mm, x.best_of(method)?)))
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    let target = match reached {
+        Some((target, cell)) => format!(
+            "; its smallest target reached is {} mm (mean), from {} points with {}",
+            fmt_target(target),
+            cell.n_train.expect("best has points"),
+            cell.distribution.name()
+        ),
+        None => "; it reaches none of the targets".to_string(),
+    };
+    format!(
+        "**{method}**: {curve}{target}.{}{failures}",
+        layout_sentence(method, curves)
+    )
+}
+
+/// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
+/// largest size both have, and the reason its design implies.
+fn layout_sentence(method: &str, curves: &[&Curve]) -> String {
+    use crate::design::layout::Design;
+    let Ok(kind) = crate::calib::registry::MethodKind::parse(method) else {
+        return String::new();
+    };
+    let Some(designed) = curves.iter().find(|c| c.distribution.selects()) else {
+        return String::new();
+    };
+    let at = |c: &Curve, n: usize| {
+        c.points
+            .iter()
+            .find(|p| p.n_train == n)
+            .and_then(|p| p.truth)
+            .map(|s| s.median)
+    };
+    let best = designed.points.iter().rev().find_map(|p| {
+        let mine = p.truth?.median;
+        curves
+            .iter()
+            .filter(|c| !c.distribution.selects())
+            .filter_map(|c| Some((at(c, p.n_train)?, *c)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(other, c)| (p.n_train, mine, other, c))
+    });
+    let Some((n, mine, other, geometric)) = best else {
+        return String::new();
+    };
+    let design = Design::of(kind);
+    let ratio = mine / other;
+    let (verb, why) = match (design, ratio) {
+        (_, r) if (0.95..=1.05).contains(&r) => (
+            "makes little difference to it",
+            "the layout matters little for this model at this size",
+        ),
+        (Design::Parameters(_), r) if r < 1.0 => (
+            "helps it",
+            "points chosen to determine its own parameters pay when its model describes the robot",
+        ),
+        (Design::Parameters(_), _) => (
+            "hurts it",
+            "D-optimal points sit at the extremes of the joint space, where the errors its model lacks are \
+             largest, so the fit is biased for the rest of the region (D-optimality assumes the model is right)",
+        ),
+        (Design::SpaceFilling, r) if r < 1.0 => (
+            "helps it",
+            "it fits a function of the joint angles, and space-filling points cover those inputs evenly",
+        ),
+        (Design::SpaceFilling, _) => (
+            "hurts it",
+            "it fits a function of the joint angles, and maximin points favour the edges of the pool's joint \
+             space, so the configurations the region's targets mostly need are sampled more thinly than by \
+             random points",
+        ),
+    };
+    format!(
+        " The {} layout ({}) {verb}: {} against {} mm with {} at {n} points — {why}.",
+        designed.distribution.name(),
+        design.describe(),
+        fmt_mm(mine),
+        fmt_mm(other),
+        geometric.distribution.name(),
+    )
 }
 
 /// The method whose parameters a method's observability describes, when another listed method has the same
@@ -335,7 +352,7 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
     if shown.is_empty() {
         return;
     }
-    let _ = writeln!(out, "## Observability\n");
+    let _ = writeln!(out, "### Observability\n");
     let _ = writeln!(
         out,
         "How well each layout's training points determine each model's parameters: O1 (geometric mean of the \
@@ -348,7 +365,7 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
     );
     for region in &a.regions {
         for m in &shown {
-            let _ = writeln!(out, "### Region `{region}`, `{m}`\n");
+            let _ = writeln!(out, "#### Region `{region}`, `{m}`\n");
             let layouts: Vec<String> = a
                 .distributions
                 .iter()
@@ -368,32 +385,40 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
     }
 }
 
-/// `summary.md`: the scenario in words, Table 1 (and 2) at the largest training set, learning curves, points
-/// needed and a verdict per method. Every number is an aggregate of `metrics.csv`'s written values.
+/// `summary.md`, top-down: the answer, the learning curves and a verdict per method, then the details (the
+/// scenario, the curves per layout, Table 1 at the largest size, runs made worse, accuracy outside the region,
+/// observability). Every number is an aggregate of `metrics.csv`'s written values.
 pub fn summary_md(study: &StudyResult) -> Result<String> {
     if study.runs.is_empty() {
         return Err(Error::Invalid("the study has no runs to report".into()));
     }
     let a = axes(study);
     let curves = learning_curves(study);
+    let all = answers(study);
     let largest = *a.sizes.last().expect("runs imply a size");
     let mut out = String::new();
     let _ = writeln!(out, "# Study `{}`\n", study.world.name);
     let _ = writeln!(
         out,
-        "How many tracker points, placed how, with which method? Every number below is computed from \
-         `metrics.csv` next to this file.\n"
+        "How many tracker points, placed how, with which method, for the accuracy you need? Every number below \
+         is computed from `metrics.csv` next to this file; the answer's every cell is in `answer.csv`.\n"
     );
-    scenario_in_words(study, &a, &mut out);
+    answer_md(study, &mut out);
 
-    accuracy_tables(study, &a, largest, &mut out);
-    learning_curve_tables(study, &a, &curves, &mut out);
-    points_needed_tables(&a, &curves, &mut out);
-
-    outside_md(study, &a, &mut out);
-    observability_md(study, &a, &mut out);
-
-    best_accuracy_md(&curves, &a, &mut out);
+    let _ = writeln!(out, "## Learning curves\n");
+    let _ = writeln!(
+        out,
+        "Median ground-truth mean (mm) over the seeds against the number of training points; the figure has \
+         every layout with its interquartile band and the floor (the true robot registered on the same points).\n"
+    );
+    for region in &a.regions {
+        let _ = writeln!(
+            out,
+            "![learning curves, region {region}](plots/learning_curves_{}.png)\n",
+            file_safe(region)
+        );
+    }
+    compact_curves_md(&a, &curves, &mut out);
 
     let _ = writeln!(out, "## Verdict\n");
     for region in &a.regions {
@@ -408,10 +433,18 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
             if these.is_empty() {
                 continue;
             }
-            let _ = writeln!(out, "- {}", verdict(m, &these, study, region, largest));
+            let _ = writeln!(out, "- {}", verdict(m, &these, study, &all));
         }
         out.push('\n');
     }
+
+    let _ = writeln!(out, "## Details\n");
+    scenario_in_words(study, &a, &mut out);
+    learning_curve_tables(study, &a, &curves, &mut out);
+    accuracy_tables(study, &a, largest, &mut out);
+    worse_md(study, &mut out);
+    outside_md(study, &a, &mut out);
+    observability_md(study, &a, &mut out);
     while out.ends_with("\n\n") {
         out.pop();
     }

@@ -1,16 +1,14 @@
-//! The tables of `summary.md`, and how it prints numbers: Table 1 (and 2) at the largest training set, the
-//! learning curves, the points needed, accuracy by distance from the training region, and the points to each
-//! method's best accuracy.
+//! The tables of `summary.md`, and how it prints numbers: the learning curves (compact, and per layout), Table 1
+//! (and 2) at the largest training set in one table per region, the runs that calibration made worse, and
+//! accuracy by distance from the training region.
 
 use std::fmt::Write as _;
 
+use crate::campaign::DistributionKind;
 use crate::study::{RunMetrics, StudyResult};
 
-use super::aggregate::{
-    Axes, Curve, CurvePoint, FLOOR_FACTOR, PLATEAU_TOLERANCE, Spread, best_target, cell_spread,
-    floor_from, floor_spread, plateau_from, points_needed, points_to, runs_of, spread,
-};
-use super::metrics::{edge_text, mm};
+use super::aggregate::{Axes, Curve, Spread, cell_spread, floor_spread, runs_of, spread};
+use super::metrics::{cell, edge_text, mm};
 
 /// A millimetre value as the summary prints it.
 pub fn fmt_mm(x: f64) -> String {
@@ -30,43 +28,26 @@ pub fn fmt_spread(s: Option<Spread>) -> String {
     }
 }
 
-/// A cell of the points-needed table: the size meeting both conditions, else which one each size meets.
-/// The floor is strict (the oracle estimates only the tracker frame), so the two parts tell a user more than
-/// "not reached" alone: where the curve stops improving, and whether it ever nears the floor.
-pub fn fmt_points_needed(points: &[CurvePoint]) -> String {
-    match points_needed(points) {
-        Some(n) => n.to_string(),
-        None => {
-            let part = |n: Option<usize>| n.map_or("never".to_string(), |n| n.to_string());
-            format!(
-                "not reached (plateau from {}; {FLOOR_FACTOR}× floor {})",
-                part(plateau_from(points)),
-                part(floor_from(points))
-            )
-        }
-    }
-}
-
 /// The rows of Table 1 (positions, mm) and Table 2 (orientations, rad): label and `metrics.csv` column.
 pub const TABLE1_ROWS: [(&str, &str); 12] = [
-    ("test mean (mm)", "test_mean_mm"),
-    ("test max (mm)", "test_max_mm"),
-    ("test std (mm)", "test_std_mm"),
-    ("test RMS (mm)", "test_rms_mm"),
-    ("test p95 (mm)", "test_p95_mm"),
-    ("ground-truth mean (mm)", "truth_mean_mm"),
-    ("ground-truth max (mm)", "truth_max_mm"),
-    ("ground-truth p95 (mm)", "truth_p95_mm"),
-    ("outside the region, mean (mm)", "outside_mean_mm"),
-    ("closed loop, mean (mm)", "closed_loop_mean_mm"),
-    ("floor: oracle's ground-truth mean (mm)", "floor_mean_mm"),
-    ("fit time (ms)", "fit_ms"),
+    ("test mean", "test_mean_mm"),
+    ("test max", "test_max_mm"),
+    ("test std", "test_std_mm"),
+    ("test RMS", "test_rms_mm"),
+    ("test p95", "test_p95_mm"),
+    ("truth mean", "truth_mean_mm"),
+    ("truth max", "truth_max_mm"),
+    ("truth p95", "truth_p95_mm"),
+    ("outside mean", "outside_mean_mm"),
+    ("closed loop mean", "closed_loop_mean_mm"),
+    ("floor mean", "floor_mean_mm"),
+    ("fit (ms)", "fit_ms"),
 ];
 pub const TABLE2_ROWS: [(&str, &str); 4] = [
-    ("test mean (rad)", "test_ori_mean_rad"),
-    ("test max (rad)", "test_ori_max_rad"),
-    ("test std (rad)", "test_ori_std_rad"),
-    ("ground-truth mean (rad)", "truth_ori_mean_rad"),
+    ("test mean", "test_ori_mean_rad"),
+    ("test max", "test_ori_max_rad"),
+    ("test std", "test_ori_std_rad"),
+    ("truth mean", "truth_ori_mean_rad"),
 ];
 
 fn fmt_column(column: &str, s: Option<Spread>) -> String {
@@ -83,77 +64,196 @@ pub(super) fn table_header(out: &mut String, first: &str, columns: &[String]) {
     let _ = writeln!(out, "|---|{}", "---:|".repeat(columns.len()));
 }
 
-/// Table 1 (positions) and, when the campaign measures orientation, Table 2 for every (region, layout) at the
-/// largest training set, with the runs that failed there.
+/// Table 1 (positions) and, when the campaign measures orientation, Table 2 at the largest training set: one
+/// table per region, a row per method and layout, a column per statistic; columns without a value anywhere and
+/// rows without a successful run are left out (those runs are counted below the table).
 pub(super) fn accuracy_tables(study: &StudyResult, a: &Axes, largest: usize, out: &mut String) {
-    let methods: Vec<String> = a.methods.iter().map(|m| format!("`{m}`")).collect();
     for region in &a.regions {
-        for &d in &a.distributions {
-            if !study.runs.iter().any(|r| {
-                &r.key.region == region && r.key.distribution == d && r.key.n_train == largest
-            }) {
+        for (table, rows, what, unit) in [
+            ("Table 1", &TABLE1_ROWS[..], "Positional errors", "mm"),
+            ("Table 2", &TABLE2_ROWS[..], "Orientational errors", "rad"),
+        ] {
+            if table == "Table 2" && !study.orientation {
+                continue;
+            }
+            let keys: Vec<(&String, DistributionKind)> = a
+                .methods
+                .iter()
+                .flat_map(|m| a.distributions.iter().map(move |&d| (m, d)))
+                .collect();
+            let value = |m: &str, d: DistributionKind, column: &str| {
+                cell_spread(study, region, d, m, largest, column)
+            };
+            let columns: Vec<(&str, &str)> = rows
+                .iter()
+                .copied()
+                .filter(|(_, c)| keys.iter().any(|(m, d)| value(m, *d, c).is_some()))
+                .collect();
+            let shown: Vec<&(&String, DistributionKind)> = keys
+                .iter()
+                .filter(|(m, d)| columns.iter().any(|(_, c)| value(m, *d, c).is_some()))
+                .collect();
+            if shown.is_empty() {
                 continue;
             }
             let _ = writeln!(
                 out,
-                "## Table 1 — region `{region}`, {} layout, {largest} training points\n",
-                d.name()
+                "### {table} — region `{region}`, {largest} training points\n"
             );
             let _ = writeln!(
                 out,
-                "Positional errors, median over the successful seeds (`nominal`, if present, is the paper's \
-                 \"Measured\").\n"
+                "{what} ({unit}; *truth*: the noise-free ground-truth grid) at the largest size, median over the successful seeds (`nominal`, if present, is the \
+                 paper's \"Measured\"); the floor is the oracle — the true robot registered on the same points.\n"
             );
-            table_header(out, "error", &methods);
-            for (label, column) in TABLE1_ROWS {
-                let row: Vec<String> = a
-                    .methods
-                    .iter()
-                    .map(|m| fmt_column(column, cell_spread(study, region, d, m, largest, column)))
-                    .collect();
-                let _ = writeln!(out, "| {label} | {} |", row.join(" | "));
+            let mut header = vec!["layout".to_string()];
+            header.extend(columns.iter().map(|(label, _)| label.to_string()));
+            table_header(out, "method", &header);
+            for (m, d) in shown {
+                let mut row = vec![d.name().to_string()];
+                row.extend(columns.iter().map(|(_, c)| fmt_column(c, value(m, *d, c))));
+                let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
             }
-            let failed: Vec<String> = a
-                .methods
-                .iter()
-                .filter_map(|m| {
-                    let runs: Vec<_> = runs_of(study, region, d, largest)
-                        .filter(|r| &r.key.method == m)
-                        .collect();
-                    let bad = runs.iter().filter(|r| r.failure.is_some()).count();
-                    (bad > 0).then(|| format!("`{m}` {bad} of {}", runs.len()))
-                })
-                .collect();
-            if !failed.is_empty() {
-                let _ = writeln!(out, "\nFailed runs (left out): {}.", failed.join(", "));
+            if table == "Table 1" {
+                let failed: Vec<String> = keys
+                    .iter()
+                    .filter_map(|(m, d)| {
+                        let runs: Vec<_> = runs_of(study, region, *d, largest)
+                            .filter(|r| &r.key.method == *m)
+                            .collect();
+                        let bad = runs.iter().filter(|r| r.failure.is_some()).count();
+                        (bad > 0).then(|| format!("`{m}` {} {bad} of {}", d.name(), runs.len()))
+                    })
+                    .collect();
+                if !failed.is_empty() {
+                    let _ = writeln!(out, "\nFailed runs (left out): {}.", failed.join(", "));
+                }
             }
             out.push('\n');
-            if study.orientation {
-                let _ = writeln!(
-                    out,
-                    "## Table 2 — region `{region}`, {} layout, {largest} training points\n",
-                    d.name()
-                );
-                let _ = writeln!(
-                    out,
-                    "Orientational errors, median over the successful seeds.\n"
-                );
-                table_header(out, "error", &methods);
-                for (label, column) in TABLE2_ROWS {
-                    let row: Vec<String> = a
-                        .methods
-                        .iter()
-                        .map(|m| {
-                            fmt_column(column, cell_spread(study, region, d, m, largest, column))
-                        })
-                        .collect();
-                    let _ = writeln!(out, "| {label} | {} |", row.join(" | "));
-                }
-                out.push('\n');
-            }
         }
     }
 }
+
+/// The learning curves in one compact table per region: a row per method on its best layout (the lowest
+/// median at the largest size), a column per size, the median ground-truth mean (mm).
+pub(super) fn compact_curves_md(a: &Axes, curves: &[Curve], out: &mut String) {
+    for region in &a.regions {
+        let _ = writeln!(
+            out,
+            "### Region `{region}`: each method on its best layout\n"
+        );
+        let mut columns = vec!["layout".to_string()];
+        columns.extend(a.sizes.iter().map(|n| n.to_string()));
+        table_header(out, "method", &columns);
+        for m in &a.methods {
+            let best = curves
+                .iter()
+                .filter(|c| &c.region == region && &c.method == m)
+                .filter_map(|c| Some((super::aggregate::plateau(&c.points)?, c)))
+                .min_by(|x, y| x.0.total_cmp(&y.0));
+            let Some((_, c)) = best else {
+                continue;
+            };
+            let mut row = vec![c.distribution.name().to_string()];
+            row.extend(a.sizes.iter().map(|&n| {
+                c.points
+                    .iter()
+                    .find(|p| p.n_train == n)
+                    .and_then(|p| p.truth)
+                    .map_or("—".into(), |s| fmt_mm(s.median))
+            }));
+            let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
+        }
+        out.push('\n');
+    }
+}
+
+/// Runs whose ground-truth mean is above `nominal`'s on the same campaign (region, layout, size, seed): the
+/// calibration made the arm worse. Counted per method and listed.
+pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
+    let column = "truth_mean_mm";
+    let mut worse: Vec<(&RunMetrics, f64, f64)> = Vec::new();
+    for r in study
+        .runs
+        .iter()
+        .filter(|r| r.failure.is_none() && r.key.method != "nominal")
+    {
+        let nominal = study.runs.iter().find(|n| {
+            n.key.method == "nominal"
+                && n.failure.is_none()
+                && n.key.region == r.key.region
+                && n.key.distribution == r.key.distribution
+                && n.key.n_train == r.key.n_train
+                && n.key.seed == r.key.seed
+        });
+        let (Some(n), Some(v)) = (nominal, cell(r, study.orientation, column)) else {
+            continue;
+        };
+        if let Some(before) = cell(n, study.orientation, column)
+            && v > before
+        {
+            worse.push((r, v, before));
+        }
+    }
+    let _ = writeln!(out, "### Runs where calibration made the arm worse\n");
+    if !study.runs.iter().any(|r| r.key.method == "nominal") {
+        let _ = writeln!(
+            out,
+            "`nominal` is not in the study, so there is nothing to compare with.\n"
+        );
+        return;
+    }
+    let compared = study
+        .runs
+        .iter()
+        .filter(|r| r.failure.is_none() && r.key.method != "nominal")
+        .count();
+    let _ = writeln!(
+        out,
+        "{} of {compared} successful runs have a ground-truth mean above `nominal`'s (no calibration) on the \
+         same campaign.{}\n",
+        worse.len(),
+        if worse.is_empty() { "" } else { " They are:" }
+    );
+    if worse.is_empty() {
+        return;
+    }
+    table_header(
+        out,
+        "method",
+        &[
+            "layout".into(),
+            "n_train".into(),
+            "seed".into(),
+            "after (mm)".into(),
+            "nominal (mm)".into(),
+        ],
+    );
+    let listed = worse.len().min(WORSE_LISTED);
+    for &(r, after, before) in &worse[..listed] {
+        let k = &r.key;
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} | {} |",
+            k.method,
+            k.distribution.name(),
+            k.n_train,
+            k.seed,
+            fmt_mm(after),
+            fmt_mm(before)
+        );
+    }
+    if worse.len() > listed {
+        let _ = writeln!(
+            out,
+            "\n… and {} more (every run's errors are in `metrics.csv`).",
+            worse.len() - listed
+        );
+    }
+    out.push('\n');
+}
+
+/// At most this many runs made worse are listed in the summary.
+const WORSE_LISTED: usize = 40;
 
 /// The learning-curve table of every (region, layout): a row per size, a column per method and the floor.
 pub(super) fn learning_curve_tables(
@@ -163,11 +263,11 @@ pub(super) fn learning_curve_tables(
     out: &mut String,
 ) {
     let methods: Vec<String> = a.methods.iter().map(|m| format!("`{m}`")).collect();
-    let _ = writeln!(out, "## Learning curves\n");
+    let _ = writeln!(out, "### Learning curves per layout\n");
     let _ = writeln!(
         out,
         "Ground-truth mean (mm) against training-set size: median [q1–q3] over the successful seeds. The floor \
-         column is the oracle's, per seed, over the same campaigns. Plots: `plots/`.\n"
+         column is the oracle's, per seed, over the same campaigns.\n"
     );
     for region in &a.regions {
         for &d in &a.distributions {
@@ -178,7 +278,7 @@ pub(super) fn learning_curve_tables(
             if these.is_empty() {
                 continue;
             }
-            let _ = writeln!(out, "### Region `{region}`, {} layout\n", d.name());
+            let _ = writeln!(out, "#### Region `{region}`, {} layout\n", d.name());
             let mut columns = methods.clone();
             columns.push("floor".into());
             table_header(out, "n_train", &columns);
@@ -205,45 +305,6 @@ pub(super) fn learning_curve_tables(
             }
             out.push('\n');
         }
-    }
-}
-
-/// The points-needed table of every region: a row per method, a column per layout.
-pub(super) fn points_needed_tables(a: &Axes, curves: &[Curve], out: &mut String) {
-    let _ = writeln!(out, "## Points needed\n");
-    let _ = writeln!(
-        out,
-        "The smallest training-set size whose median ground-truth mean is within {} % of the method's plateau \
-         (its median at the largest size) and within {FLOOR_FACTOR} × the floor at that size. When no size is, \
-         the cell says from which size the curve is on its plateau, and from which it is within \
-         {FLOOR_FACTOR} × the floor (\"never\" in this study). The floor is the oracle registered on the same \
-         points: it estimates 6 parameters where the methods estimate dozens, so no method comes close at \
-         large sizes; a method whose plateau is many times the floor is limited by its model, one still \
-         falling at the largest size by the number of points.\n",
-        PLATEAU_TOLERANCE * 100.0
-    );
-    for region in &a.regions {
-        let _ = writeln!(out, "### Region `{region}`\n");
-        let layouts: Vec<String> = a
-            .distributions
-            .iter()
-            .map(|d| d.name().to_string())
-            .collect();
-        table_header(out, "method", &layouts);
-        for m in &a.methods {
-            let row: Vec<String> = a
-                .distributions
-                .iter()
-                .map(|&d| {
-                    curves
-                        .iter()
-                        .find(|c| &c.region == region && c.distribution == d && &c.method == m)
-                        .map_or("—".into(), |c| fmt_points_needed(&c.points))
-                })
-                .collect();
-            let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
-        }
-        out.push('\n');
     }
 }
 
@@ -276,7 +337,7 @@ pub(super) fn outside_md(study: &StudyResult, a: &Axes, out: &mut String) {
     {
         return;
     }
-    let _ = writeln!(out, "## Accuracy by distance from the training region\n");
+    let _ = writeln!(out, "### Accuracy by distance from the training region\n");
     let _ = writeln!(
         out,
         "Ground-truth mean (mm) of the calibration fitted in one region (trained on {largest} points, {} \
@@ -308,7 +369,7 @@ pub(super) fn outside_md(study: &StudyResult, a: &Axes, out: &mut String) {
             if bands.is_empty() {
                 continue;
             }
-            let _ = writeln!(out, "### Trained in `{training}`, used in `{used}`\n");
+            let _ = writeln!(out, "#### Trained in `{training}`, used in `{used}`\n");
             table_header(out, "distance", &methods);
             for (from, to) in bands {
                 let row: Vec<String> = a
@@ -331,52 +392,5 @@ pub(super) fn outside_md(study: &StudyResult, a: &Axes, out: &mut String) {
             }
             out.push('\n');
         }
-    }
-}
-
-/// Which layout gets each method to its best accuracy with the fewest points: the floor above is out of
-/// every method's reach, so this asks for the method's own best plateau instead.
-pub(super) fn best_accuracy_md(curves: &[Curve], a: &Axes, out: &mut String) {
-    let _ = writeln!(out, "## Points to the best accuracy\n");
-    let _ = writeln!(
-        out,
-        "Per method, the smallest training-set size at which each layout's median ground-truth mean is within \
-         {} % of the method's best plateau over all layouts (the target, mm); **bold**: the layout that needs \
-         the fewest points (ties: all of them); \"never\": not within the sizes studied.\n",
-        PLATEAU_TOLERANCE * 100.0
-    );
-    for region in &a.regions {
-        let _ = writeln!(out, "### Region `{region}`\n");
-        let mut columns = vec!["target (mm)".to_string()];
-        columns.extend(a.distributions.iter().map(|d| d.name().to_string()));
-        table_header(out, "method", &columns);
-        for m in &a.methods {
-            let these: Vec<&Curve> = curves
-                .iter()
-                .filter(|c| &c.region == region && &c.method == m)
-                .collect();
-            let Some(target) = best_target(&these) else {
-                continue;
-            };
-            let needed: Vec<Option<usize>> = a
-                .distributions
-                .iter()
-                .map(|&d| {
-                    these
-                        .iter()
-                        .find(|c| c.distribution == d)
-                        .and_then(|c| points_to(&c.points, target))
-                })
-                .collect();
-            let fewest = needed.iter().flatten().min().copied();
-            let mut row = vec![fmt_mm(target)];
-            row.extend(needed.iter().map(|n| match n {
-                Some(n) if Some(*n) == fewest => format!("**{n}**"),
-                Some(n) => n.to_string(),
-                None => "never".into(),
-            }));
-            let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
-        }
-        out.push('\n');
     }
 }

@@ -19,6 +19,24 @@ fn default_distance_bands() -> Vec<f64> {
     vec![0.025, 0.05, 0.1, 0.2]
 }
 
+fn default_targets_mm() -> Vec<f64> {
+    vec![0.5, 0.3, 0.2, 0.1, 0.05]
+}
+
+/// Seconds per measured point, by part; see scenarios/README.md for where the defaults come from.
+fn default_move_s() -> f64 {
+    3.0
+}
+fn default_settle_s() -> f64 {
+    2.0
+}
+fn default_measure_s() -> f64 {
+    1.0
+}
+
+/// The share of seeds in which a size must reach a target for the answer to name it.
+pub const REACH_SHARE: f64 = 0.8;
+
 /// The `[study]` section of a scenario.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -53,6 +71,17 @@ pub struct StudyConfig {
     /// …, and beyond the last edge.
     #[serde(default = "default_distance_bands")]
     pub distance_bands_m: Vec<f64>,
+    /// The accuracies a user may need (mm, on the ground-truth mean and on its 95th percentile): the answer
+    /// gives, per target, the fewest training points reaching it in at least [`REACH_SHARE`] of the seeds.
+    #[serde(default = "default_targets_mm")]
+    pub targets_mm: Vec<f64>,
+    /// Tracker time per measured point (s): moving to it, waiting for the arm to settle, measuring.
+    #[serde(default = "default_move_s")]
+    pub move_s: f64,
+    #[serde(default = "default_settle_s")]
+    pub settle_s: f64,
+    #[serde(default = "default_measure_s")]
+    pub measure_s: f64,
 }
 
 impl StudyConfig {
@@ -144,6 +173,30 @@ impl StudyConfig {
                 self.distance_bands_m
             ));
         }
+        if self.targets_mm.is_empty() {
+            return Err("targets_mm is empty: list at least one accuracy (mm)".into());
+        }
+        for (i, t) in self.targets_mm.iter().enumerate() {
+            if !(t.is_finite() && *t > 0.0) {
+                return Err(format!(
+                    "targets_mm: {t} must be a positive number of millimetres"
+                ));
+            }
+            if self.targets_mm[..i].contains(t) {
+                return Err(format!("targets_mm: {t} is listed twice"));
+            }
+        }
+        for (name, v) in [
+            ("move_s", self.move_s),
+            ("settle_s", self.settle_s),
+            ("measure_s", self.measure_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!(
+                    "{name} = {v} must be a finite, non-negative time (s)"
+                ));
+            }
+        }
         for &n in &self.sizes {
             let total = self.campaign_points(n);
             if let Some(r) = regions.iter().find(|r| total > r.points) {
@@ -204,6 +257,16 @@ impl StudyConfig {
         combos * per_layout_and_seed
             + self.campaigns(regions) as f64 * methods * sets * EVALUATE_S_PER_POINT
             + regions as f64 * sets * SIMULATE_S_PER_POINT
+    }
+
+    /// Tracker time (s) of one measured point: move, settle, measure.
+    pub fn seconds_per_point(&self) -> f64 {
+        self.move_s + self.settle_s + self.measure_s
+    }
+
+    /// Tracker hours of the campaign of a training set of `n`: its training and validation points.
+    pub fn campaign_hours(&self, n: usize) -> f64 {
+        self.campaign_points(n) as f64 * self.seconds_per_point() / 3600.0
     }
 
     /// The method shown point by point: `detail_method`, or the first method.

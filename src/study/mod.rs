@@ -16,10 +16,13 @@ use crate::eval::Stats;
 use crate::world::WorldConfig;
 
 pub mod config;
+pub mod limits;
+mod measure;
 mod progress;
 pub mod sweep;
 
 pub use config::StudyConfig;
+pub use limits::Limits;
 
 /// Ground-truth errors of one run in one band of distance from its training region, over the ground-truth
 /// points (grid and shell) of one region where the calibration is used.
@@ -131,4 +134,6 @@ pub struct StudyResult {
     pub detail: Detail,
     /// Whether the campaign measures orientation (three reflectors).
     pub orientation: bool,
+    /// Per region, what the tracker's noise and the arm's repeatability leave (empty when not computed).
+    pub limits: Vec<Limits>,
 }

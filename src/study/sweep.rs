@@ -6,7 +6,8 @@
 //! every (region, layout, size `n`, seed), one campaign of `n + ceil(validation_ratio · n)` measured points
 //! with that layout is generated, split into training and validation points by a seeded shuffle, and every
 //! method is fitted on it — together with the oracle, registered on the same points, whose ground-truth mean
-//! is the run's floor. A campaign the region cannot supply, or a method that cannot be fitted, makes failed
+//! is the run's floor. A model-based layout (`d-optimal`) gives each method the points chosen for it
+//! ([`Design`]): one pool per (region, layout, size, seed), one campaign per distinct design chosen from it. A campaign the region cannot supply, or a method that cannot be fitted, makes failed
 //! runs with the reason; the sweep goes on.
 //!
 //! Every random draw derives from (scenario seed, region index, layout, size, seed) — the layout's place in
@@ -17,111 +18,36 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
-use rand::RngCore;
-use rand::seq::SliceRandom;
 use rayon::prelude::*;
 
-use super::progress::Counter;
+use super::measure::{
+    Measure, Prepared, TEST_SET, campaign_seed, layout_index, region_truth, split,
+};
 pub use super::progress::Progress;
+use super::progress::{Counter, run_weight};
 use super::{
     BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
     StudyResult,
 };
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
-use crate::campaign::{Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig};
+use crate::campaign::{Campaign, CampaignConfig, DistributionKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
-use crate::design::{DOptimal, DesignModel, Indices};
+use crate::design::layout::Design;
+use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::accuracy::{
-    GroundTruth, TruthSet, closed_loop_errors, fit_context, test_errors, truth_errors,
+    GroundTruth, closed_loop_errors, fit_context, test_errors, truth_errors,
 };
 use crate::eval::{Oracle, Stats};
 use crate::measurements::as_dataset;
-use crate::rng::{Stream, derive};
 use crate::world::World;
-
-/// The region-level seed index of the test set, far from any layout index.
-const TEST_SET: u64 = u64::MAX;
-
-/// The seed of one campaign of the study: region `r`, layout `d` (its place in [`DistributionKind::ALL`]),
-/// training-set size `n` and repetition `s`; the test set uses `d = TEST_SET`.
-fn campaign_seed(scenario_seed: u64, r: u64, d: u64, n: u64, s: u64) -> u64 {
-    let region_layout = derive(scenario_seed, Stream::Study, &[r, d]).next_u64();
-    derive(region_layout, Stream::Study, &[n, s]).next_u64()
-}
-
-fn layout_index(d: DistributionKind) -> u64 {
-    DistributionKind::ALL
-        .iter()
-        .position(|&k| k == d)
-        .expect("every layout is in ALL") as u64
-}
-
-/// Where a study's campaigns are measured, and how: the world, the campaign configuration, the regions, and the
-/// selector of model-based layouts.
-#[derive(Clone, Copy)]
-struct Measure<'a> {
-    world: &'a World,
-    campaign: &'a CampaignConfig,
-    regions: &'a [RegionConfig],
-    selector: Option<&'a dyn crate::campaign::Selector>,
-}
-
-impl Measure<'_> {
-    /// A campaign of `points` measured points in region `r` with `layout`, drawn from `seed`.
-    fn campaign(
-        &self,
-        r: usize,
-        layout: DistributionKind,
-        points: usize,
-        seed: u64,
-    ) -> Result<Campaign> {
-        let region = RegionConfig {
-            points,
-            distribution: layout,
-            ..self.regions[r].clone()
-        };
-        Generator {
-            world: self.world,
-            config: self.campaign,
-            seed,
-            selector: self.selector,
-        }
-        .run(std::slice::from_ref(&region))
-    }
-}
-
-/// The ground truth restricted to one region.
-fn region_truth(truth: &GroundTruth, region: &str) -> GroundTruth {
-    let only = |set: &TruthSet| TruthSet {
-        points: set
-            .points
-            .iter()
-            .filter(|p| p.region == region)
-            .cloned()
-            .collect(),
-        rejections: set
-            .rejections
-            .iter()
-            .filter(|(name, _)| *name == region)
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect(),
-    };
-    GroundTruth {
-        tracker_pose: truth.tracker_pose,
-        measured_point: truth.measured_point,
-        nest_rotation: truth.nest_rotation,
-        grid: only(&truth.grid),
-        shell: only(&truth.shell),
-        closed_loop: only(&truth.closed_loop),
-    }
-}
 
 /// What every run of one region shares.
 struct RegionSets {
     test: Dataset,
     truth: GroundTruth,
+    limits: super::Limits,
 }
 
 /// One campaign of the sweep: indices into the scenario's regions and the study's lists.
@@ -151,6 +77,9 @@ struct Shared<'a> {
     measure: Measure<'a>,
     config: &'a StudyConfig,
     world: &'a World,
+    /// The selectors of model-based layouts, one per distinct design, and each method's index into them.
+    selectors: Vec<&'a dyn Selector>,
+    design_of: Vec<usize>,
     ctx: FitContext<'a>,
     /// Per method, the model whose observability the run reports.
     designs: Vec<Option<DesignModel<'a>>>,
@@ -187,19 +116,34 @@ pub fn run_study(
         .unwrap_or(0);
 
     let ctx = fit_context(world);
-    let selector = DOptimal::when_needed(
-        config.distributions.iter().copied(),
-        &campaign.selection,
-        &ctx,
-        &world.mounting.nominal,
-    )?;
+    // Model-based layouts choose each method's points for that method: one selector per distinct design.
+    let mut layouts: Vec<Design> = Vec::new();
+    let mut design_of = Vec::with_capacity(kinds.len());
+    for &kind in &kinds {
+        let design = Design::of(kind);
+        design_of.push(
+            layouts
+                .iter()
+                .position(|d| *d == design)
+                .unwrap_or_else(|| {
+                    layouts.push(design);
+                    layouts.len() - 1
+                }),
+        );
+    }
+    let selectors: Vec<Box<dyn Selector + '_>> = if config.distributions.iter().any(|d| d.selects())
+    {
+        layouts
+            .iter()
+            .map(|d| d.selector(&ctx, &world.mounting.nominal, &campaign.selection))
+            .collect::<Result<_>>()?
+    } else {
+        Vec::new()
+    };
     let measure = Measure {
         world,
         campaign,
         regions,
-        selector: selector
-            .as_ref()
-            .map(|s| s as &dyn crate::campaign::Selector),
     };
     let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth_config())?;
     let region_sets = regions
@@ -217,6 +161,7 @@ pub fn run_study(
                     ))
                 })?;
             Ok(RegionSets {
+                limits: super::Limits::of(world, &region.name, &campaign),
                 test: as_dataset(
                     &campaign,
                     &format!("the test set of region '{}'", region.name),
@@ -241,7 +186,11 @@ pub fn run_study(
             }
         }
     }
-    let counter = Counter::new(progress, jobs.len() * kinds.len());
+    let total_work = jobs
+        .iter()
+        .map(|j| kinds.len() as u64 * run_weight(config, config.sizes[j.size]))
+        .sum();
+    let counter = Counter::new(progress, jobs.len() * kinds.len(), total_work);
     let designs = kinds
         .iter()
         .map(|&kind| DesignModel::for_method(kind, &ctx, &world.mounting.nominal))
@@ -250,6 +199,8 @@ pub fn run_study(
         measure,
         config,
         world,
+        selectors: selectors.iter().map(|s| s.as_ref()).collect(),
+        design_of,
         ctx,
         designs,
         kinds,
@@ -274,6 +225,7 @@ pub fn run_study(
     }
     keyed.sort_by_key(|(k, _)| *k);
     let runs: Vec<RunMetrics> = keyed.into_iter().map(|(_, run)| run).collect();
+    let limits = shared.regions.iter().map(|r| r.limits.clone()).collect();
     let detail = details
         .into_iter()
         .max_by_key(|d| d.n_train)
@@ -294,6 +246,7 @@ pub fn run_study(
         runs,
         detail,
         orientation: world.mounting.count() >= 3,
+        limits,
     })
 }
 
@@ -366,44 +319,73 @@ impl Shared<'_> {
             n as u64,
             job.seed,
         );
-        let (campaign, train, val) = match self.prepare(job, seed) {
-            Ok(prepared) => prepared,
-            Err(e) => {
-                let reason = reason(&e);
-                let runs = (0..self.kinds.len())
-                    .map(|m| (m, self.failed(job, m, reason.clone(), 0.0)))
-                    .collect();
-                self.progress.add(self.kinds.len());
-                return JobOutput { runs, detail: None };
+        let k = self.kinds.len();
+        // Which methods share a campaign: all of them, or, for a model-based layout, those of one design.
+        let bundles: Vec<(Vec<usize>, Result<Prepared>)> = if layout.selects() {
+            match self.prepare_designed(job, seed) {
+                Ok(prepared) => prepared
+                    .into_iter()
+                    .enumerate()
+                    .map(|(g, p)| ((0..k).filter(|&m| self.design_of[m] == g).collect(), p))
+                    .collect(),
+                Err(e) => vec![((0..k).collect(), Err(e))],
             }
-        };
-        let sets = &self.regions[job.region];
-        let floor_mean = Oracle::new(self.world)
-            .and_then(|o| o.registered_on(&[&train, &val]))
-            .ok()
-            .and_then(|oracle| {
-                Stats::of(&truth_errors(&oracle, &sets.truth, &sets.truth.grid.points).position)
-            })
-            .map(|s| s.mean);
-        let detail_job = self.is_detail_candidate(job);
-        let observability = self.observability(&train);
-        let outcomes: Vec<MethodRun> = (0..self.kinds.len())
-            .into_par_iter()
-            .map(|m| {
-                let mut outcome =
-                    self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
-                if outcome.metrics.failure.is_none() {
-                    outcome.metrics.observability = observability[m];
-                }
-                self.progress.add(1);
-                outcome
-            })
-            .collect();
-        let detail = if detail_job {
-            self.detail(job, region, &campaign, &train, &val, &outcomes)
         } else {
-            None
+            vec![((0..k).collect(), self.prepare(job, seed))]
         };
+        let detail_job = self.is_detail_candidate(job);
+        let mut outcomes: Vec<Option<MethodRun>> = (0..k).map(|_| None).collect();
+        let mut detail_campaign = None;
+        for (methods, prepared) in bundles {
+            let (campaign, train, val) = match prepared {
+                Ok(prepared) => prepared,
+                Err(e) => {
+                    let reason = reason(&e);
+                    for &m in &methods {
+                        outcomes[m] = Some(MethodRun {
+                            metrics: self.failed(job, m, reason.clone(), 0.0),
+                            points: None,
+                        });
+                    }
+                    self.progress.add(methods.len(), run_weight(self.config, n));
+                    continue;
+                }
+            };
+            let sets = &self.regions[job.region];
+            let floor_mean = Oracle::new(self.world)
+                .and_then(|o| o.registered_on(&[&train, &val]))
+                .ok()
+                .and_then(|oracle| {
+                    Stats::of(&truth_errors(&oracle, &sets.truth, &sets.truth.grid.points).position)
+                })
+                .map(|s| s.mean);
+            let observability = self.observability(&train);
+            let runs: Vec<(usize, MethodRun)> = methods
+                .par_iter()
+                .map(|&m| {
+                    let mut outcome =
+                        self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
+                    if outcome.metrics.failure.is_none() {
+                        outcome.metrics.observability = observability[m];
+                    }
+                    self.progress.add(1, run_weight(self.config, n));
+                    (m, outcome)
+                })
+                .collect();
+            for (m, run) in runs {
+                outcomes[m] = Some(run);
+            }
+            if detail_job && methods.contains(&self.detail_method) {
+                detail_campaign = Some((campaign, train, val));
+            }
+        }
+        let outcomes: Vec<MethodRun> = outcomes
+            .into_iter()
+            .map(|o| o.expect("every method belongs to one bundle"))
+            .collect();
+        let detail = detail_campaign.and_then(|(campaign, train, val)| {
+            self.detail(job, region, &campaign, &train, &val, &outcomes)
+        });
         JobOutput {
             runs: outcomes
                 .into_iter()
@@ -414,19 +396,30 @@ impl Shared<'_> {
         }
     }
 
-    /// The job's campaign and its training and validation sets.
-    fn prepare(&self, job: Job, seed: u64) -> Result<(Campaign, Dataset, Dataset)> {
+    /// The campaigns of a model-based layout, one per design (in the order of `self.selectors`), each split into
+    /// training and validation sets; an error when the shared pool cannot be planned.
+    fn prepare_designed(&self, job: Job, seed: u64) -> Result<Vec<Result<Prepared>>> {
         let n = self.config.sizes[job.size];
         let layout = self.config.distributions[job.distribution];
         let total = self.config.campaign_points(n);
-        let campaign = self.measure.campaign(job.region, layout, total, seed)?;
-        let data = as_dataset(&campaign, "the study's campaign")?;
-        let mut order: Vec<usize> = (0..data.len()).collect();
-        order.shuffle(&mut derive(seed, Stream::Split, &[]));
-        let (mut train, mut val) = (order[..n.min(order.len())].to_vec(), order[n..].to_vec());
-        train.sort_unstable();
-        val.sort_unstable();
-        Ok((campaign, data.subset(&train), data.subset(&val)))
+        Ok(self
+            .measure
+            .campaigns(job.region, layout, total, seed, &self.selectors)?
+            .into_iter()
+            .map(|c| split(c?, n, seed))
+            .collect())
+    }
+
+    /// The job's campaign and its training and validation sets.
+    fn prepare(&self, job: Job, seed: u64) -> Result<Prepared> {
+        let n = self.config.sizes[job.size];
+        let layout = self.config.distributions[job.distribution];
+        let total = self.config.campaign_points(n);
+        split(
+            self.measure.campaign(job.region, layout, total, seed)?,
+            n,
+            seed,
+        )
     }
 
     #[allow(clippy::too_many_arguments)]
