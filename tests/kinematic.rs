@@ -256,8 +256,10 @@ fn elastic_recovers_known_compliances() {
     );
 }
 
+/// A campaign that cannot determine every parameter (joint 4 held still; 8 points for ~30 parameters) is not
+/// refused: the fit keeps what the data determine, holds the rest at nominal, and names each with its reason.
 #[test]
-fn a_campaign_with_one_joint_fixed_is_reported_rank_deficient() {
+fn a_campaign_with_one_joint_fixed_names_what_it_cannot_determine() {
     let errors = random_errors(1e-4, 14);
     let extra = Extra {
         fixed_joint: Some(3),
@@ -269,25 +271,64 @@ fn a_campaign_with_one_joint_fixed_is_reported_rank_deficient() {
         s.data.subset(&range(400, 500)),
     );
     let ctx = context(&s.chain, &s.dh, Payload::NONE);
-    let err = fit(MethodKind::Kinematic, &ctx, &train, &val)
-        .err()
-        .expect("joint 4 never moves: the model is not identifiable");
-    let msg = err.to_string();
-    eprintln!("{msg}");
-    assert!(
-        msg.contains("do not identify")
-            && msg.contains("rank ")
-            && msg.contains("condition number"),
-        "{msg}"
+    let free = KinematicModel::fit(
+        false,
+        &ctx,
+        &synthetic(&errors, 500, 4, &Extra::default())
+            .data
+            .subset(&range(0, 400)),
+        &val,
+    )
+    .unwrap();
+    let model = KinematicModel::fit(false, &ctx, &train, &val).unwrap();
+    let names: Vec<&str> = model
+        .undetermined
+        .iter()
+        .map(|u| u.parameter.as_str())
+        .collect();
+    eprintln!(
+        "joint 4 fixed: kept {} of {} (free campaign: {}, undetermined {:?}); undetermined {names:?}: {}",
+        model.kept.len(),
+        model.kept.len() + names.len(),
+        free.kept.len(),
+        free.undetermined
+            .iter()
+            .map(|u| &u.parameter)
+            .collect::<Vec<_>>(),
+        model.undetermined[0].reason
     );
-    assert!(!msg.contains('\n'), "one line: {msg}");
-    // Too few points for the parameters is the same refusal.
+    // Joint 4's own frame errors are what a still joint 4 cannot separate from its neighbours'.
+    assert!(names.len() > free.undetermined.len(), "{names:?}");
+    assert!(names.contains(&"e44"), "{names:?}");
+    assert_eq!(
+        model.kept.len() + names.len(),
+        free.kept.len() + free.undetermined.len()
+    );
+    assert_eq!(model.rank, model.kept.len());
+    // Every reason is words, on one line.
+    for u in &model.undetermined {
+        assert!(u.reason.len() > 40 && !u.reason.contains('\n'), "{u:?}");
+    }
+    // The arm is still calibrated where the data are.
+    let obs = model
+        .registration()
+        .observe(&s.data.subset(&range(400, 500)))
+        .unwrap();
+    let after = mean(
+        obs.iter()
+            .map(|o| (o.position - model.predict(&o.q).position).norm()),
+    );
+    assert!(after <= 1.2 * noise_mean(), "{after}");
+    // Too few points for the parameters: a smaller set, not a refusal.
     let few = s.data.subset(&range(0, 8));
-    let msg = fit(MethodKind::Kinematic, &ctx, &few, &val)
-        .err()
-        .expect("8 points cannot identify ~40 parameters")
-        .to_string();
-    assert!(msg.contains("rank "), "{msg}");
+    let small = KinematicModel::fit(false, &ctx, &few, &val).unwrap();
+    eprintln!(
+        "8 points: kept {}, undetermined {}",
+        small.kept.len(),
+        small.undetermined.len()
+    );
+    assert!(small.kept.len() <= 24, "{}", small.kept.len());
+    assert!(!small.undetermined.is_empty());
 }
 
 #[test]
@@ -333,8 +374,9 @@ fn paper_campaign(points: usize, seed: u64) -> (Chain, DhChain, Payload, Dataset
     (sim.world.nominal, dh, scenario.robot.payload(), data)
 }
 
-/// The identifiable set is a property of the robot, not of the data: the same names for 5 seeds × 3
-/// training-set sizes of the paper's campaign, and every one of those campaigns identifies all of it.
+/// The structurally identifiable set is a property of the robot and the mounting, and what these campaigns
+/// determine of it does not change with the draw: the same names for 5 seeds × 3 training-set sizes of the
+/// paper's campaign, each at full rank.
 #[test]
 fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
     let mut reference: Option<(Vec<String>, Vec<String>)> = None;
@@ -362,6 +404,7 @@ fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
             );
             assert_eq!(kin.rank, kin.kept.len());
             assert_eq!(ela.rank, ela.kept.len());
+            assert_eq!(kin.kept.len() + kin.undetermined.len(), 31);
             let names = (kin.kept_names(), ela.kept_names());
             match &reference {
                 None => reference = Some(names),
@@ -382,8 +425,9 @@ fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
     let extra: Vec<&String> = ela.iter().filter(|n| !kin.contains(n)).collect();
     assert_eq!(extra, ["c2", "c3", "c4", "c5", "c6"]);
     // Four parameters per joint frame (DH's four, less what the tracker frame and the mounting take) for a
-    // position-only campaign: 6 + 3 + 22.
-    assert_eq!(kin.len(), 31, "{kin:?}");
+    // position-only campaign: 6 + 3 + 22 structurally; the reflector sits (nearly) on joint 7's axis, so two
+    // of frame 6's errors, which only turn the point about that axis, are not determined: 6 + 3 + 20.
+    assert_eq!(kin.len(), 29, "{kin:?}");
 }
 
 /// Three reflectors: the measured orientation is fitted too, and the nest's 0.22 rad turn against its drawing

@@ -25,6 +25,14 @@
 //! Jacobian (columns scaled to unit norm) give the rank and condition number that `report()` shows, and a
 //! rank below the set's size is refused with the least determined parameters named.
 //!
+//! **What the data determine.** Structural redundancy is not the whole story: a reflector a few micrometres
+//! from the last joint's axis makes the rotations about it structurally independent but unmeasurable, and a
+//! small training set cannot fix every parameter. So the structural set is reduced on the training Jacobian
+//! itself ([`identify::determined`]): in the same priority order, a parameter is kept only if its standard
+//! deviation given the kept ones before it is below the size a real arm's parameter reaches; the others stay
+//! nominal and are reported as [`Undetermined`], with the reason in words. What is left has full rank
+//! unless the tracker frame or the mounting themselves are not determined (always kept, so then refused).
+//!
 //! **Reflector nests and 6-DoF probes.** With three reflectors the measured flange orientation is fitted too; a
 //! rotation residual φ (rad) is weighted by the nest's RMS radius r (m), i.e. as the displacement `r·φ` it causes
 //! at the reflectors, the quantity the tracker actually measured. A 6-DoF probe's orientation is fitted the same
@@ -55,8 +63,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use gravity::GravityModel;
-pub use identify::Identification;
-use identify::{identifiability, structural_set};
+pub use identify::{Identification, MIN_NOISE_M, Undetermined};
+use identify::{determined, identifiability, standard_deviations, structural_set};
 use params::State;
 pub use params::{Param, candidates};
 use problem::{Point, Problem};
@@ -131,8 +139,15 @@ pub struct KinematicModel {
     /// The structurally identifiable parameters, in priority order, and their fitted values.
     pub kept: Vec<Param>,
     pub values: Vec<f64>,
+    /// Standard deviation of each kept value from the training residuals (empty when there are no degrees
+    /// of freedom left or the Jacobian is singular).
+    #[serde(default)]
+    pub std: Vec<f64>,
     /// Candidates left out as structurally redundant or without effect.
     pub dropped: Vec<Param>,
+    /// Structurally identifiable parameters the training data do not determine, held at their nominal values.
+    #[serde(default)]
+    pub undetermined: Vec<Undetermined>,
     /// Rank and condition number of the training Jacobian (columns scaled to unit norm).
     pub rank: usize,
     pub condition_number: f64,
@@ -214,13 +229,29 @@ impl KinematicModel {
             base: base.clone(),
             params: all.clone(),
         };
-        let kept = structural_set(&probe, &lower, &upper, &all, gravity.as_ref());
-        let dropped: Vec<Param> = all.iter().copied().filter(|p| !kept.contains(p)).collect();
+        let structural = structural_set(&probe, &lower, &upper, &all, gravity.as_ref());
+        let dropped: Vec<Param> = all
+            .iter()
+            .copied()
+            .filter(|p| !structural.contains(p))
+            .collect();
 
-        // Does the training data identify it?
+        // What the training data determine of it, at the noise the nominal model leaves (an upper bound of
+        // what the fit will leave); the rest stays nominal and is reported.
         probe.points = to_points(registration.observe(train)?);
+        probe.params = structural.clone();
+        let start =
+            |params: &[Param]| -> Vec<f64> { params.iter().map(|&p| base.get(p)).collect() };
+        let (_, j0) = probe.evaluate(&start(&structural), true);
+        let sigma = (registration.frame.rms / 3f64.sqrt()).max(MIN_NOISE_M);
+        let (kept, undetermined) = determined(
+            &j0.expect("jacobian requested"),
+            &structural,
+            sigma,
+            probe.points.len(),
+        );
         probe.params = kept.clone();
-        let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
+        let x0 = start(&kept);
         let (_, j0) = probe.evaluate(&x0, true);
         let id = identifiability(&j0.expect("jacobian requested"), &kept);
         if id.rank < kept.len() {
@@ -256,6 +287,10 @@ impl KinematicModel {
             ))
         })?;
         let values: Vec<f64> = minimum.x.iter().copied().collect();
+        let std = {
+            let (r, j) = probe.evaluate(&values, true);
+            standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default()
+        };
         let state = State::with(&base, &kept, &values);
         let rms = |points: &[Point]| -> f64 {
             let sum: f64 = points
@@ -308,7 +343,9 @@ impl KinematicModel {
             orientation_length_m: length,
             kept,
             values,
+            std,
             dropped,
+            undetermined,
             rank: id.rank,
             condition_number: id.condition,
             evaluations: minimum.evaluations,
@@ -392,6 +429,12 @@ impl KinematicModel {
         for (i, &v) in self.values.iter().enumerate() {
             plausible::length(&format!("values[{i}]"), v)?;
         }
+        if !self.std.is_empty() {
+            plausible::count("std", self.std.len(), self.kept.len(), "kept parameters")?;
+            for (i, &v) in self.std.iter().enumerate() {
+                plausible::non_negative(&format!("std[{i}]"), v, f64::MAX, "standard deviation")?;
+            }
+        }
         if self.rank > self.kept.len() {
             return Err(plausible::invalid(
                 "rank",
@@ -474,6 +517,8 @@ impl Fitted for KinematicModel {
         json!({
             "kept_parameters": self.kept_names(),
             "dropped_parameters": self.dropped.iter().map(|p| p.name()).collect::<Vec<_>>(),
+            "undetermined": self.undetermined,
+            "std": self.kept.iter().zip(&self.std).map(|(p, s)| (p.name(), json!(s))).collect::<serde_json::Map<_, _>>(),
             "rank": self.rank,
             "condition_number": self.condition_number,
             "evaluations": self.evaluations,
