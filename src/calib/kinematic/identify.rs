@@ -182,8 +182,8 @@ pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiabi
 }
 
 /// The largest size a parameter of a real arm has, against which "the data determine it" is judged: a
-/// frame error of a centimetre or 50 mrad is already a damaged arm (catalogue arms are built to tenths of a
-/// millimetre and a few milliradians), and a joint that turns 10 mrad under a newton-metre holds no load
+/// frame error of 5 mm or 10 mrad is already a damaged arm (catalogue arms are built to tenths of a
+/// millimetre and a few milliradians; the UR10 fitted here errs by 0.3 mm and 0.5–0.8 mrad), and a joint that turns 10 mrad under a newton-metre holds no load
 /// (measured arms: 1e-6 to 3e-4 rad/Nm). The tracker frame and the mounting have no such size: they are kept
 /// whatever the data, and must be determined (else the fit is refused).
 pub(super) fn plausible_size(p: Param) -> Option<f64> {
@@ -196,8 +196,8 @@ pub(super) fn plausible_size(p: Param) -> Option<f64> {
 }
 
 /// See [`plausible_size`].
-pub(super) const PLAUSIBLE_LENGTH_M: f64 = 0.01;
-pub(super) const PLAUSIBLE_ANGLE_RAD: f64 = 0.05;
+pub(super) const PLAUSIBLE_LENGTH_M: f64 = 0.005;
+pub(super) const PLAUSIBLE_ANGLE_RAD: f64 = 0.01;
 pub(super) const PLAUSIBLE_COMPLIANCE: f64 = 0.01;
 /// The smallest measurement noise (m, per coordinate) the determination assumes: a tracker's resolution, so
 /// that noise-free data do not make parameters of sub-micrometre effect "determined".

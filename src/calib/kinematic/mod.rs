@@ -63,8 +63,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use gravity::GravityModel;
+use identify::{Identifiability, determined, identifiability, standard_deviations, structural_set};
 pub use identify::{Identification, MIN_NOISE_M, Undetermined};
-use identify::{determined, identifiability, standard_deviations, structural_set};
 use params::State;
 pub use params::{Param, candidates};
 use problem::{Point, Problem};
@@ -236,61 +236,57 @@ impl KinematicModel {
             .filter(|p| !structural.contains(p))
             .collect();
 
-        // What the training data determine of it, at the noise the nominal model leaves (an upper bound of
-        // what the fit will leave); the rest stays nominal and is reported.
+        // What the training data determine of it, at the noise the nominal model leaves: an upper bound of
+        // what the fit will leave, so what is kept is determined whatever the fit explains. (Judging again at
+        // the fitted residual was tried: it lets parameters of a near-axis reflector back in at some draws and
+        // sizes, and the fit fails again.) The rest stays nominal and is reported.
         probe.points = to_points(registration.observe(train)?);
         probe.params = structural.clone();
-        let start =
-            |params: &[Param]| -> Vec<f64> { params.iter().map(|&p| base.get(p)).collect() };
-        let (_, j0) = probe.evaluate(&start(&structural), true);
+        let x_struct: Vec<f64> = structural.iter().map(|&p| base.get(p)).collect();
+        let j_struct = probe
+            .evaluate(&x_struct, true)
+            .1
+            .expect("jacobian requested");
         let sigma = (registration.frame.rms / 3f64.sqrt()).max(MIN_NOISE_M);
-        let (kept, undetermined) = determined(
-            &j0.expect("jacobian requested"),
-            &structural,
-            sigma,
-            probe.points.len(),
-        );
-        probe.params = kept.clone();
-        let x0 = start(&kept);
-        let (_, j0) = probe.evaluate(&x0, true);
-        let id = identifiability(&j0.expect("jacobian requested"), &kept);
-        if id.rank < kept.len() {
-            let weakest = if id.weakest.is_empty() {
-                String::new()
-            } else {
-                format!("; least determined: {}", id.weakest.join(", "))
-            };
-            return Err(Error::Invalid(format!(
-                "{method}: the training points do not identify the model: rank {} of {} \
-                 (condition number {:.1e}){weakest}; measure more points and vary every joint",
-                id.rank,
-                kept.len(),
-                id.condition
-            )));
-        }
-
-        let k = kept.len();
-        let whitening = id
-            .whitening
-            .clone()
-            .unwrap_or_else(|| DMatrix::identity(k, k));
-        let minimum = minimize(
-            &probe,
-            &DVector::from_vec(x0),
-            &whitening,
-            options.max_evaluations.max(2),
-        )
-        .map_err(|why| {
-            Error::Invalid(format!(
-                "{method}: Levenberg–Marquardt did not converge ({why}); the data may be \
-                 inconsistent with a constant-error model"
-            ))
-        })?;
-        let values: Vec<f64> = minimum.x.iter().copied().collect();
-        let std = {
-            let (r, j) = probe.evaluate(&values, true);
-            standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default()
+        // Compliances are non-negative: a fit that pulls one below zero holds it at zero (the bound) and is
+        // repeated without it, one at a time from the most negative — an active-set bounded least squares.
+        let mut at_bound: Vec<Undetermined> = Vec::new();
+        let (kept, mut undetermined, id, minimum, values, std) = loop {
+            let (mut kept, mut undetermined) =
+                determined(&j_struct, &structural, sigma, probe.points.len());
+            let bound = |p: &Param| at_bound.iter().any(|u| u.parameter == p.name());
+            kept.retain(|p| !bound(p));
+            let (id, minimum, values, std) = solve_kept(&mut probe, &base, &kept, options, method)?;
+            let negative = kept
+                .iter()
+                .zip(&values)
+                .enumerate()
+                .filter(|(_, (p, v))| p.is_compliance() && **v < 0.0)
+                .min_by(|a, b| a.1.1.total_cmp(b.1.1))
+                .map(|(i, _)| i);
+            if let Some(i) = negative {
+                let sd = std.get(i).copied();
+                at_bound.push(Undetermined {
+                    parameter: kept[i].name(),
+                    std: sd,
+                    plausible: identify::PLAUSIBLE_COMPLIANCE,
+                    reason: format!(
+                        "the data pull it below zero ({:.2e}{} rad/Nm), which no joint is; held at 0, the bound",
+                        values[i],
+                        sd.map_or(String::new(), |s| format!(" ± {s:.1e}"))
+                    ),
+                });
+                continue;
+            }
+            undetermined.retain(|u| !at_bound.iter().any(|b| b.parameter == u.parameter));
+            break (kept, undetermined, id, minimum, values, std);
         };
+        undetermined.extend(
+            structurally_dropped(&dropped)
+                .into_iter()
+                .filter(|u| u.parameter.starts_with('c')),
+        );
+        undetermined.extend(at_bound);
         let state = State::with(&base, &kept, &values);
         let rms = |points: &[Point]| -> f64 {
             let sum: f64 = points
@@ -378,7 +374,7 @@ impl KinematicModel {
             (true, Some(c), Some(g)) => {
                 plausible::count("compliance", c.len(), n, "joints")?;
                 for (j, &v) in c.iter().enumerate() {
-                    plausible::bounded(
+                    plausible::non_negative(
                         &format!("compliance[{j}]"),
                         v,
                         MAX_COMPLIANCE,
@@ -456,6 +452,34 @@ impl KinematicModel {
         Ok(())
     }
 
+    /// Per joint of an `elastic` model: the compliance (rad/Nm), its standard deviation, and whether the data
+    /// determined it (else why not); empty for `kinematic`.
+    pub fn compliances(&self) -> Vec<serde_json::Value> {
+        let Some(c) = &self.compliance else {
+            return Vec::new();
+        };
+        c.iter()
+            .enumerate()
+            .map(|(j, &value)| {
+                let name = Param::Compliance(j).name();
+                let std = self
+                    .kept
+                    .iter()
+                    .position(|&p| p == Param::Compliance(j))
+                    .and_then(|i| self.std.get(i));
+                let why = self.undetermined.iter().find(|u| u.parameter == name);
+                json!({
+                    "joint": self.basis.joint_names.get(j),
+                    "parameter": name,
+                    "value_rad_per_nm": value,
+                    "std_rad_per_nm": std,
+                    "determined": why.is_none() && std.is_some(),
+                    "undetermined_because": why.map(|u| &u.reason),
+                })
+            })
+            .collect()
+    }
+
     /// Names of the kept parameters, in priority order.
     pub fn kept_names(&self) -> Vec<String> {
         self.kept.iter().map(|p| p.name()).collect()
@@ -475,6 +499,80 @@ impl KinematicModel {
         };
         ErrorFrames::new(&self.basis.dh, &qd, &self.errors).flange
     }
+}
+
+/// Levenberg–Marquardt on `kept` from the base state: the rank check first (a rank below the set's size is
+/// refused, naming the least determined), then the fit, its values and their standard deviations.
+fn solve_kept(
+    probe: &mut Problem,
+    base: &State,
+    kept: &[Param],
+    options: &KinematicOptions,
+    method: &MethodInfo,
+) -> Result<(Identifiability, solve::Minimum, Vec<f64>, Vec<f64>)> {
+    probe.params = kept.to_vec();
+    let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
+    let (_, j0) = probe.evaluate(&x0, true);
+    let id = identifiability(&j0.expect("jacobian requested"), kept);
+    if id.rank < kept.len() {
+        let weakest = if id.weakest.is_empty() {
+            String::new()
+        } else {
+            format!("; least determined: {}", id.weakest.join(", "))
+        };
+        return Err(Error::Invalid(format!(
+            "{method}: the training points do not identify the model: rank {} of {} \
+             (condition number {:.1e}){weakest}; measure more points and vary every joint",
+            id.rank,
+            kept.len(),
+            id.condition
+        )));
+    }
+    let k = kept.len();
+    let whitening = id
+        .whitening
+        .clone()
+        .unwrap_or_else(|| DMatrix::identity(k, k));
+    let minimum = minimize(
+        probe,
+        &DVector::from_vec(x0),
+        &whitening,
+        options.max_evaluations.max(2),
+    )
+    .map_err(|why| {
+        Error::Invalid(format!(
+            "{method}: Levenberg–Marquardt did not converge ({why}); the data may be \
+             inconsistent with a constant-error model"
+        ))
+    })?;
+    let values: Vec<f64> = minimum.x.iter().copied().collect();
+    let (r, j) = probe.evaluate(&values, true);
+    let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
+    Ok((id, minimum, values, std))
+}
+
+/// What the structural analysis drops, in words: a compliance because gravity (and the declared payload)
+/// never load its joint within the limits, a frame error because at no configuration does it move the
+/// measured point other than as parameters kept before it do.
+fn structurally_dropped(dropped: &[Param]) -> Vec<Undetermined> {
+    dropped
+        .iter()
+        .map(|p| Undetermined {
+            parameter: p.name(),
+            std: None,
+            plausible: identify::plausible_size(*p).unwrap_or(0.0),
+            reason: if p.is_compliance() {
+                "gravity and the declared payload load this joint nowhere within the joint limits (its axis \
+                 stays vertical, or the masses it carries sit on it), so its compliance deflects nothing the \
+                 tracker could measure; held at 0"
+            } else {
+                "at every configuration within the joint limits it moves the measured point only as parameters \
+                 kept before it do, or not at all (e.g. a rotation about the axis the reflector sits on); \
+                 structurally redundant, held at 0"
+            }
+            .into(),
+        })
+        .collect()
 }
 
 impl Fitted for KinematicModel {
@@ -528,6 +626,7 @@ impl Fitted for KinematicModel {
             "test_rms_m": test_rms,
             "orientation_length_m": self.orientation_length_m,
             "compliance_rad_per_nm": self.compliance,
+            "compliances": self.compliances(),
             "values": values,
         })
     }
