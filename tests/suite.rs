@@ -10,6 +10,7 @@ mod campaign;
 mod dataset;
 mod design;
 mod evaluation;
+mod honest;
 mod identify;
 mod kinematic;
 mod magnitudes;
