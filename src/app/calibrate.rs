@@ -190,13 +190,27 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
+    // "Measured" (before) is one number per data set: the nominal kinematics under the nominal model's own
+    // registration, whatever the method (a method's refined registration is reported apart).
+    let nominal = match options.method {
+        MethodKind::Nominal => None,
+        _ => Some(registry::fit(MethodKind::Nominal, &ctx, train, val)?),
+    };
+    let nominal_model = nominal.as_deref().unwrap_or(model);
     let (obs_test, test_errors, test_registration) = match &test_file {
         None => {
             let obs = model
                 .registration()
                 .observe(test)
                 .map_err(|e| e.in_data(&data.origin, "the test split"))?;
-            let e = BeforeAfter::of(model, &obs);
+            let mut e = BeforeAfter::of(model, &obs);
+            if nominal.is_some() {
+                let nominal_obs = nominal_model
+                    .registration()
+                    .observe(test)
+                    .map_err(|e| e.in_data(&data.origin, "the test split"))?;
+                e = e.measured_by(&BeforeAfter::of(nominal_model, &nominal_obs));
+            }
             (obs, e, None)
         }
         Some(t) => {
@@ -204,11 +218,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             let after = transfer::evaluate(model, t, mode)
                 .map_err(|e| e.in_data(&t.origin, "registering the test campaign"))?;
             // "Before": the nominal kinematics, registered on the test campaign the same way.
-            let nominal = match options.method {
-                MethodKind::Nominal => None,
-                _ => Some(registry::fit(MethodKind::Nominal, &ctx, train, val)?),
-            };
-            let before = transfer::evaluate(nominal.as_deref().unwrap_or(model), t, mode)?;
+            let before = transfer::evaluate(nominal_model, t, mode)?;
             let obs = after.registration.observe(t)?;
             let described = TestRegistrationReport {
                 mode,
@@ -246,7 +256,13 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         Some(t) => {
             let t_test = t.subset(&parts.test_indices);
             let obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
-            let e = BeforeAfter::of(model, &obs_truth);
+            let mut e = BeforeAfter::of(model, &obs_truth);
+            if nominal.is_some() {
+                let nominal_truth = nominal_model
+                    .registration()
+                    .observe_points(&test.q, &t_test.in_tracker)?;
+                e = e.measured_by(&BeforeAfter::of(nominal_model, &nominal_truth));
+            }
             report.truth = Some(e.summary()?);
             Some(e)
         }

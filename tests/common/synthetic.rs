@@ -27,7 +27,11 @@ pub const PAYLOAD: Payload = Payload {
 pub type Field = fn(&[f64]) -> Vector3<f64>;
 
 pub fn iiwa() -> (Chain, DhChain) {
-    let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
+    robot("robots/iiwa7.urdf")
+}
+
+pub fn robot(urdf_path: &str) -> (Chain, DhChain) {
+    let chain = urdf::load_file(urdf_path, None).unwrap();
     let dh = DhChain::from_chain(&chain).unwrap();
     (chain, dh)
 }
@@ -47,6 +51,10 @@ pub struct Extra {
     pub field: Option<Field>,
     /// A nest of three reflectors around the mounting point instead of one reflector on it.
     pub nest: bool,
+    /// The UR10 (6 joints, `robots/ur10.urdf`) instead of the iiwa.
+    pub ur10: bool,
+    /// The reflector exactly on the last joint's axis (the flange z axis, 30 mm out), nominally and truly.
+    pub on_axis: bool,
 }
 
 pub struct Synthetic {
@@ -60,18 +68,37 @@ pub struct Synthetic {
 }
 
 /// `n` points of a forward-reaching family of configurations (one IK branch, as a campaign has). The random
-/// draws, per point: the 7 joint offsets, then 3 normal noise samples per reflector.
+/// draws, per point: the joint offsets (one per joint), then 3 normal noise samples per reflector.
 pub fn synthetic(errors: &FrameErrors, n: usize, seed: u64, extra: &Extra) -> Synthetic {
-    let (chain, dh) = iiwa();
+    synthetic_with_noise(errors, n, seed, extra, NOISE)
+}
+
+/// [`synthetic`] with the tracker noise `noise` (m per axis; 0 for noise-free data).
+pub fn synthetic_with_noise(
+    errors: &FrameErrors,
+    n: usize,
+    seed: u64,
+    extra: &Extra,
+    noise: f64,
+) -> Synthetic {
+    let (chain, dh) = if extra.ur10 {
+        robot("robots/ur10.urdf")
+    } else {
+        iiwa()
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let tracker = Isometry3::from_parts(
         Translation3::new(3.0, 0.3, 1.7),
         UnitQuaternion::from_euler_angles(0.01, 0.02, 3.1),
     );
-    let (mount_nominal, mount_true) = (
-        Point3::new(0.0, 0.0, 0.03),
-        Point3::new(0.0006, -0.0004, 0.0302),
-    );
+    let (mount_nominal, mount_true) = if extra.on_axis {
+        (Point3::new(0.0, 0.0, 0.03), Point3::new(0.0, 0.0, 0.03))
+    } else {
+        (
+            Point3::new(0.0, 0.0, 0.03),
+            Point3::new(0.0006, -0.0004, 0.0302),
+        )
+    };
     let offsets: Vec<Vector3<f64>> = if extra.nest {
         vec![
             Vector3::new(0.03, 0.0, 0.0),
@@ -81,13 +108,18 @@ pub fn synthetic(errors: &FrameErrors, n: usize, seed: u64, extra: &Extra) -> Sy
     } else {
         vec![Vector3::zeros()]
     };
-    let noise = Normal::new(0.0, NOISE).unwrap();
+    let noise = Normal::new(0.0, noise).unwrap();
     let (mut q, mut measured, mut nominal, mut truth) = (vec![], vec![], vec![], vec![]);
     let mut truth_orientation = vec![];
-    let centre = [0.0, 0.6, 0.0, -1.6, 0.0, -0.8, 0.0];
+    let centre: &[f64] = if extra.ur10 {
+        &[0.3, -1.4, 1.6, -1.8, -1.5, 0.2]
+    } else {
+        &[0.0, 0.6, 0.0, -1.6, 0.0, -0.8, 0.0]
+    };
+    let dof = centre.len();
     let spread = extra.spread.unwrap_or(0.5);
     let mut frames = Frames::new(&chain);
-    let mut tau = vec![0.0; 7];
+    let mut tau = vec![0.0; dof];
     for _ in 0..n {
         let qi: Vec<f64> = centre
             .iter()

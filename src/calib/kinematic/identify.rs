@@ -5,6 +5,7 @@ use crate::numeric;
 use nalgebra::{DMatrix, DVector, Point3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 
 use super::gravity::GravityModel;
 use super::params::{Param, State, candidates};
@@ -187,6 +188,149 @@ pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiabi
         weakest,
         whitening,
     }
+}
+
+/// The largest size a parameter of a real arm has, against which "the data determine it" is judged: a
+/// frame error of 5 mm or 10 mrad is already a damaged arm (catalogue arms are built to tenths of a
+/// millimetre and a few milliradians; the UR10 fitted here errs by 0.3 mm and 0.5–0.8 mrad), and a joint that turns 10 mrad under a newton-metre holds no load
+/// (measured arms: 1e-6 to 3e-4 rad/Nm). The tracker frame and the mounting have no such size: they are kept
+/// whatever the data, and must be determined (else the fit is refused).
+pub(super) fn plausible_size(p: Param) -> Option<f64> {
+    match p {
+        Param::TrackerRotation(_) | Param::TrackerTranslation(_) | Param::Mounting(_) => None,
+        Param::Error(e) if e.component <= 3 => Some(PLAUSIBLE_LENGTH_M),
+        Param::Error(_) => Some(PLAUSIBLE_ANGLE_RAD),
+        Param::Compliance(_) => Some(PLAUSIBLE_COMPLIANCE),
+    }
+}
+
+/// See [`plausible_size`].
+pub(super) const PLAUSIBLE_LENGTH_M: f64 = 0.005;
+pub(super) const PLAUSIBLE_ANGLE_RAD: f64 = 0.01;
+pub(super) const PLAUSIBLE_COMPLIANCE: f64 = 0.01;
+/// The smallest measurement noise (m, per coordinate) the determination assumes: a tracker's resolution, so
+/// that noise-free data do not make parameters of sub-micrometre effect "determined".
+pub const MIN_NOISE_M: f64 = 2e-6;
+
+/// A parameter the training data do not determine: its standard deviation from these points (at the
+/// assumed noise), and why, in words.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Undetermined {
+    pub parameter: String,
+    /// Standard deviation the data would give it (its unit: m, rad or rad/Nm); `None` when it has no
+    /// effect of its own at all.
+    pub std: Option<f64>,
+    pub plausible: f64,
+    pub reason: String,
+}
+
+fn unit(p: Param) -> &'static str {
+    match p {
+        Param::Compliance(_) => "rad/Nm",
+        Param::Error(e) if e.component <= 3 => "m",
+        _ => "rad",
+    }
+}
+
+/// Which structurally identifiable parameters the training data determine: Gram–Schmidt over the training
+/// Jacobian's columns in priority order (unscaled: a column's size is its effect), keeping a parameter when
+/// its standard deviation given the ones kept before it, `sigma / rest`, is below its [`plausible_size`].
+/// The rest are held at their nominal values (zero error, no compliance) and returned with the reason. A
+/// column may be weak because it barely moves the measured point at these configurations (a reflector on
+/// the last joint's axis and that joint's rotation about it; an unloaded joint's compliance; too few
+/// points), or because its effect is nearly that of parameters kept before it.
+pub(super) fn determined(
+    j: &DMatrix<f64>,
+    params: &[Param],
+    sigma: f64,
+    points: usize,
+) -> (Vec<Param>, Vec<Undetermined>) {
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    let mut kept_cols: Vec<(usize, DVector<f64>)> = Vec::new();
+    let mut kept = Vec::new();
+    let mut undetermined = Vec::new();
+    for (c, &prm) in params.iter().enumerate() {
+        let col = j.column(c).into_owned();
+        let norm = col.norm();
+        let mut v = col.clone();
+        for _ in 0..2 {
+            for b in &basis {
+                let d = b.dot(&v);
+                v.axpy(-d, b, 1.0);
+            }
+        }
+        let rest = v.norm();
+        let std = if rest > 0.0 {
+            sigma / rest
+        } else {
+            f64::INFINITY
+        };
+        match plausible_size(prm) {
+            Some(size) if std.is_nan() || std > size => {
+                let u = unit(prm);
+                // RMS displacement of a measured point (mm) if the parameter had its plausible size.
+                let effect = norm * size / (points.max(1) as f64).sqrt() * 1e3;
+                let own = if norm > 0.0 { rest / norm } else { 0.0 };
+                let reason = if own < 0.1 {
+                    let twin = kept_cols
+                        .iter()
+                        .max_by(|a, b| {
+                            let cos = |w: &DVector<f64>| (w.dot(&col) / (w.norm() * norm)).abs();
+                            cos(&a.1).total_cmp(&cos(&b.1))
+                        })
+                        .map_or(String::new(), |(k, _)| {
+                            format!(" (most of all {})", params[*k].name())
+                        });
+                    format!(
+                        "its effect on these points is nearly that of parameters kept before it{twin}: only {:.1} % \
+                         is its own, so the data would give it a standard deviation of {std:.2e} {u}, more than the \
+                         {size} {u} a real arm's parameter reaches",
+                        own * 100.0
+                    )
+                } else {
+                    format!(
+                        "it barely moves the measured points at these configurations ({effect:.2e} mm RMS at its \
+                         plausible size of {size} {u}, against {:.2e} mm of noise), so the data would give it a \
+                         standard deviation of {std:.2e} {u}; e.g. a rotation about an axis the reflector sits on, \
+                         or a joint gravity does not load",
+                        sigma * 1e3
+                    )
+                };
+                undetermined.push(Undetermined {
+                    parameter: prm.name(),
+                    std: std.is_finite().then_some(std),
+                    plausible: size,
+                    reason,
+                });
+            }
+            _ => {
+                if rest > 0.0 {
+                    basis.push(v / rest);
+                }
+                kept_cols.push((c, col));
+                kept.push(prm);
+            }
+        }
+    }
+    (kept, undetermined)
+}
+
+/// Standard deviations of the parameters at a fitted estimate: `s·√((JᵀJ)⁻¹)ₖₖ` with `s²` the residual sum of
+/// squares over the degrees of freedom (`None` without any, or where `JᵀJ` is singular).
+pub(super) fn standard_deviations(j: &DMatrix<f64>, residual: &DVector<f64>) -> Option<Vec<f64>> {
+    let (m, k) = j.shape();
+    if m <= k {
+        return None;
+    }
+    let s2 = residual.norm_squared() / (m - k) as f64;
+    let r = j.clone().qr().r();
+    // (JᵀJ)⁻¹ = R⁻¹R⁻ᵀ: row norms of R⁻¹.
+    let std: Vec<f64> = r
+        .try_inverse()?
+        .row_iter()
+        .map(|row| (s2 * row.norm_squared()).sqrt())
+        .collect();
+    std.iter().all(|v| v.is_finite()).then_some(std)
 }
 
 /// The structurally identifiable parameters among `candidates`, in their order (see the module notes):

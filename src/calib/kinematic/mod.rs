@@ -25,6 +25,14 @@
 //! Jacobian (columns scaled to unit norm) give the rank and condition number that `report()` shows, and a
 //! rank below the set's size is refused with the least determined parameters named.
 //!
+//! **What the data determine.** Structural redundancy is not the whole story: a reflector a few micrometres
+//! from the last joint's axis makes the rotations about it structurally independent but unmeasurable, and a
+//! small training set cannot fix every parameter. So the structural set is reduced on the training Jacobian
+//! itself ([`identify::determined`]): in the same priority order, a parameter is kept only if its standard
+//! deviation given the kept ones before it is below the size a real arm's parameter reaches; the others stay
+//! nominal and are reported as [`Undetermined`], with the reason in words. What is left has full rank
+//! unless the tracker frame or the mounting themselves are not determined (always kept, so then refused).
+//!
 //! **Reflector nests and 6-DoF probes.** With three reflectors the measured flange orientation is fitted too; a
 //! rotation residual φ (rad) is weighted by the nest's RMS radius r (m), i.e. as the displacement `r·φ` it causes
 //! at the reflectors, the quantity the tracker actually measured. A 6-DoF probe's orientation is fitted the same
@@ -55,8 +63,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use gravity::GravityModel;
-pub use identify::Identification;
-use identify::{identifiability, structural_set};
+use identify::{Identifiability, determined, identifiability, standard_deviations, structural_set};
+pub use identify::{Identification, MIN_NOISE_M, Undetermined};
 use params::State;
 pub use params::{Param, candidates};
 use problem::{Point, Problem};
@@ -131,8 +139,15 @@ pub struct KinematicModel {
     /// The structurally identifiable parameters, in priority order, and their fitted values.
     pub kept: Vec<Param>,
     pub values: Vec<f64>,
+    /// Standard deviation of each kept value from the training residuals (empty when there are no degrees
+    /// of freedom left or the Jacobian is singular).
+    #[serde(default)]
+    pub std: Vec<f64>,
     /// Candidates left out as structurally redundant or without effect.
     pub dropped: Vec<Param>,
+    /// Structurally identifiable parameters the training data do not determine, held at their nominal values.
+    #[serde(default)]
+    pub undetermined: Vec<Undetermined>,
     /// Rank and condition number of the training Jacobian (columns scaled to unit norm).
     pub rank: usize,
     pub condition_number: f64,
@@ -214,48 +229,64 @@ impl KinematicModel {
             base: base.clone(),
             params: all.clone(),
         };
-        let kept = structural_set(&probe, &lower, &upper, &all, gravity.as_ref());
-        let dropped: Vec<Param> = all.iter().copied().filter(|p| !kept.contains(p)).collect();
+        let structural = structural_set(&probe, &lower, &upper, &all, gravity.as_ref());
+        let dropped: Vec<Param> = all
+            .iter()
+            .copied()
+            .filter(|p| !structural.contains(p))
+            .collect();
 
-        // Does the training data identify it?
+        // What the training data determine of it, at the noise the nominal model leaves: an upper bound of
+        // what the fit will leave, so what is kept is determined whatever the fit explains. (Judging again at
+        // the fitted residual was tried: it lets parameters of a near-axis reflector back in at some draws and
+        // sizes, and the fit fails again.) The rest stays nominal and is reported.
         probe.points = to_points(registration.observe(train)?);
-        probe.params = kept.clone();
-        let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
-        let (_, j0) = probe.evaluate(&x0, true);
-        let id = identifiability(&j0.expect("jacobian requested"), &kept);
-        if id.rank < kept.len() {
-            let weakest = if id.weakest.is_empty() {
-                String::new()
-            } else {
-                format!("; least determined: {}", id.weakest.join(", "))
-            };
-            return Err(Error::Invalid(format!(
-                "{method}: the training points do not identify the model: rank {} of {} \
-                 (condition number {:.1e}){weakest}; measure more points and vary every joint",
-                id.rank,
-                kept.len(),
-                id.condition
-            )));
-        }
-
-        let k = kept.len();
-        let whitening = id
-            .whitening
-            .clone()
-            .unwrap_or_else(|| DMatrix::identity(k, k));
-        let minimum = minimize(
-            &probe,
-            &DVector::from_vec(x0),
-            &whitening,
-            options.max_evaluations.max(2),
-        )
-        .map_err(|why| {
-            Error::Invalid(format!(
-                "{method}: Levenberg–Marquardt did not converge ({why}); the data may be \
-                 inconsistent with a constant-error model"
-            ))
-        })?;
-        let values: Vec<f64> = minimum.x.iter().copied().collect();
+        probe.params = structural.clone();
+        let x_struct: Vec<f64> = structural.iter().map(|&p| base.get(p)).collect();
+        let j_struct = probe
+            .evaluate(&x_struct, true)
+            .1
+            .expect("jacobian requested");
+        let sigma = (registration.frame.rms / 3f64.sqrt()).max(MIN_NOISE_M);
+        // Compliances are non-negative: a fit that pulls one below zero holds it at zero (the bound) and is
+        // repeated without it, one at a time from the most negative — an active-set bounded least squares.
+        let mut at_bound: Vec<Undetermined> = Vec::new();
+        let (kept, mut undetermined, id, minimum, values, std) = loop {
+            let (mut kept, mut undetermined) =
+                determined(&j_struct, &structural, sigma, probe.points.len());
+            let bound = |p: &Param| at_bound.iter().any(|u| u.parameter == p.name());
+            kept.retain(|p| !bound(p));
+            let (id, minimum, values, std) = solve_kept(&mut probe, &base, &kept, options, method)?;
+            let negative = kept
+                .iter()
+                .zip(&values)
+                .enumerate()
+                .filter(|(_, (p, v))| p.is_compliance() && **v < 0.0)
+                .min_by(|a, b| a.1.1.total_cmp(b.1.1))
+                .map(|(i, _)| i);
+            if let Some(i) = negative {
+                let sd = std.get(i).copied();
+                at_bound.push(Undetermined {
+                    parameter: kept[i].name(),
+                    std: sd,
+                    plausible: identify::PLAUSIBLE_COMPLIANCE,
+                    reason: format!(
+                        "the data pull it below zero ({:.2e}{} rad/Nm), which no joint is; held at 0, the bound",
+                        values[i],
+                        sd.map_or(String::new(), |s| format!(" ± {s:.1e}"))
+                    ),
+                });
+                continue;
+            }
+            undetermined.retain(|u| !at_bound.iter().any(|b| b.parameter == u.parameter));
+            break (kept, undetermined, id, minimum, values, std);
+        };
+        undetermined.extend(
+            structurally_dropped(&dropped)
+                .into_iter()
+                .filter(|u| u.parameter.starts_with('c')),
+        );
+        undetermined.extend(at_bound);
         let state = State::with(&base, &kept, &values);
         let rms = |points: &[Point]| -> f64 {
             let sum: f64 = points
@@ -308,7 +339,9 @@ impl KinematicModel {
             orientation_length_m: length,
             kept,
             values,
+            std,
             dropped,
+            undetermined,
             rank: id.rank,
             condition_number: id.condition,
             evaluations: minimum.evaluations,
@@ -341,7 +374,7 @@ impl KinematicModel {
             (true, Some(c), Some(g)) => {
                 plausible::count("compliance", c.len(), n, "joints")?;
                 for (j, &v) in c.iter().enumerate() {
-                    plausible::bounded(
+                    plausible::non_negative(
                         &format!("compliance[{j}]"),
                         v,
                         MAX_COMPLIANCE,
@@ -392,6 +425,12 @@ impl KinematicModel {
         for (i, &v) in self.values.iter().enumerate() {
             plausible::length(&format!("values[{i}]"), v)?;
         }
+        if !self.std.is_empty() {
+            plausible::count("std", self.std.len(), self.kept.len(), "kept parameters")?;
+            for (i, &v) in self.std.iter().enumerate() {
+                plausible::non_negative(&format!("std[{i}]"), v, f64::MAX, "standard deviation")?;
+            }
+        }
         if self.rank > self.kept.len() {
             return Err(plausible::invalid(
                 "rank",
@@ -413,6 +452,34 @@ impl KinematicModel {
         Ok(())
     }
 
+    /// Per joint of an `elastic` model: the compliance (rad/Nm), its standard deviation, and whether the data
+    /// determined it (else why not); empty for `kinematic`.
+    pub fn compliances(&self) -> Vec<serde_json::Value> {
+        let Some(c) = &self.compliance else {
+            return Vec::new();
+        };
+        c.iter()
+            .enumerate()
+            .map(|(j, &value)| {
+                let name = Param::Compliance(j).name();
+                let std = self
+                    .kept
+                    .iter()
+                    .position(|&p| p == Param::Compliance(j))
+                    .and_then(|i| self.std.get(i));
+                let why = self.undetermined.iter().find(|u| u.parameter == name);
+                json!({
+                    "joint": self.basis.joint_names.get(j),
+                    "parameter": name,
+                    "value_rad_per_nm": value,
+                    "std_rad_per_nm": std,
+                    "determined": why.is_none() && std.is_some(),
+                    "undetermined_because": why.map(|u| &u.reason),
+                })
+            })
+            .collect()
+    }
+
     /// Names of the kept parameters, in priority order.
     pub fn kept_names(&self) -> Vec<String> {
         self.kept.iter().map(|p| p.name()).collect()
@@ -432,6 +499,80 @@ impl KinematicModel {
         };
         ErrorFrames::new(&self.basis.dh, &qd, &self.errors).flange
     }
+}
+
+/// Levenberg–Marquardt on `kept` from the base state: the rank check first (a rank below the set's size is
+/// refused, naming the least determined), then the fit, its values and their standard deviations.
+fn solve_kept(
+    probe: &mut Problem,
+    base: &State,
+    kept: &[Param],
+    options: &KinematicOptions,
+    method: &MethodInfo,
+) -> Result<(Identifiability, solve::Minimum, Vec<f64>, Vec<f64>)> {
+    probe.params = kept.to_vec();
+    let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
+    let (_, j0) = probe.evaluate(&x0, true);
+    let id = identifiability(&j0.expect("jacobian requested"), kept);
+    if id.rank < kept.len() {
+        let weakest = if id.weakest.is_empty() {
+            String::new()
+        } else {
+            format!("; least determined: {}", id.weakest.join(", "))
+        };
+        return Err(Error::Invalid(format!(
+            "{method}: the training points do not identify the model: rank {} of {} \
+             (condition number {:.1e}){weakest}; measure more points and vary every joint",
+            id.rank,
+            kept.len(),
+            id.condition
+        )));
+    }
+    let k = kept.len();
+    let whitening = id
+        .whitening
+        .clone()
+        .unwrap_or_else(|| DMatrix::identity(k, k));
+    let minimum = minimize(
+        probe,
+        &DVector::from_vec(x0),
+        &whitening,
+        options.max_evaluations.max(2),
+    )
+    .map_err(|why| {
+        Error::Invalid(format!(
+            "{method}: Levenberg–Marquardt did not converge ({why}); the data may be \
+             inconsistent with a constant-error model"
+        ))
+    })?;
+    let values: Vec<f64> = minimum.x.iter().copied().collect();
+    let (r, j) = probe.evaluate(&values, true);
+    let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
+    Ok((id, minimum, values, std))
+}
+
+/// What the structural analysis drops, in words: a compliance because gravity (and the declared payload)
+/// never load its joint within the limits, a frame error because at no configuration does it move the
+/// measured point other than as parameters kept before it do.
+fn structurally_dropped(dropped: &[Param]) -> Vec<Undetermined> {
+    dropped
+        .iter()
+        .map(|p| Undetermined {
+            parameter: p.name(),
+            std: None,
+            plausible: identify::plausible_size(*p).unwrap_or(0.0),
+            reason: if p.is_compliance() {
+                "gravity and the declared payload load this joint nowhere within the joint limits (its axis \
+                 stays vertical, or the masses it carries sit on it), so its compliance deflects nothing the \
+                 tracker could measure; held at 0"
+            } else {
+                "at every configuration within the joint limits it moves the measured point only as parameters \
+                 kept before it do, or not at all (e.g. a rotation about the axis the reflector sits on); \
+                 structurally redundant, held at 0"
+            }
+            .into(),
+        })
+        .collect()
 }
 
 impl Fitted for KinematicModel {
@@ -474,6 +615,8 @@ impl Fitted for KinematicModel {
         json!({
             "kept_parameters": self.kept_names(),
             "dropped_parameters": self.dropped.iter().map(|p| p.name()).collect::<Vec<_>>(),
+            "undetermined": self.undetermined,
+            "std": self.kept.iter().zip(&self.std).map(|(p, s)| (p.name(), json!(s))).collect::<serde_json::Map<_, _>>(),
             "rank": self.rank,
             "condition_number": self.condition_number,
             "evaluations": self.evaluations,
@@ -483,6 +626,7 @@ impl Fitted for KinematicModel {
             "test_rms_m": test_rms,
             "orientation_length_m": self.orientation_length_m,
             "compliance_rad_per_nm": self.compliance,
+            "compliances": self.compliances(),
             "values": values,
         })
     }
