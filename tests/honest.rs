@@ -14,8 +14,17 @@ use tempfile::TempDir;
 
 /// A paper_iiwa campaign of `points` points written as `measurements.csv` and `truth.csv` into `dir`.
 fn campaign(dir: &Path, points: usize) -> (PathBuf, PathBuf) {
+    campaign_of(dir, points, 2019)
+}
+
+/// The same with the scenario's `seed`: another draw of the true robot, written under `dir`.
+fn campaign_of(dir: &Path, points: usize, seed: u64) -> (PathBuf, PathBuf) {
+    let dir = dir.join(format!("campaign_{seed}"));
+    std::fs::create_dir_all(&dir).unwrap();
     let text = std::fs::read_to_string("scenarios/paper_iiwa.toml").unwrap();
-    let text = text.replacen("points = 2335", &format!("points = {points}"), 1);
+    let text = text
+        .replacen("points = 2335", &format!("points = {points}"), 1)
+        .replacen("seed = 2019", &format!("seed = {seed}"), 1);
     let scenario = Scenario::parse(&text, "paper_iiwa (edited)").unwrap();
     let sim = calibench::app::simulate(&scenario).unwrap();
     let data = dir.join("measurements.csv");
@@ -98,4 +107,68 @@ fn measured_is_one_number_per_data_set() {
             assert_ne!(own.mean_mm, r.test.before.mean_mm);
         }
     }
+}
+
+/// `calibrate` flags a calibration worse than nominal: in `report.json` (`worse_than_nominal`, `warnings`)
+/// and as a `warning:` line; one that helps is not flagged.
+#[test]
+fn a_calibration_worse_than_nominal_is_flagged() {
+    let dir = TempDir::new().unwrap();
+    let (data, _) = campaign(dir.path(), 240);
+    let good = fit(&options(
+        &data,
+        MethodKind::Elastic,
+        dir.path().join("good"),
+    ))
+    .unwrap();
+    assert!(!good.report.worse_than_nominal && good.report.warnings.is_empty());
+    // The same summary with the two means swapped is what a worse calibration reports.
+    let mut worse = good.report.test.clone();
+    std::mem::swap(&mut worse.before, &mut worse.after);
+    let warnings = calibench::app::calibrate::worse_than_nominal(&worse, "on the test split");
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(warnings[0].contains("WORSE") && warnings[0].contains("on the test split"));
+    // Through the binary: an arm that is exactly its nominal model (the measurements are the nominal
+    // reflector positions, tracker at the base, plus 20 µm noise) can only be made worse; a residual
+    // regression on 24 training points does so.
+    let text = std::fs::read_to_string(&data).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
+    let noise = rand_distr::Normal::new(0.0, 20e-6).unwrap();
+    let mut perfect = header.join(",") + "\n";
+    for line in lines {
+        let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+        for axis in ["x1", "y1", "z1"] {
+            let nominal: f64 = cells[col(&format!("nom_{axis}"))].parse().unwrap();
+            let v = nominal + rand_distr::Distribution::sample(&noise, &mut rng);
+            cells[col(axis)] = format!("{v}");
+        }
+        perfect += &(cells.join(",") + "\n");
+    }
+    let perfect_path = dir.path().join("perfect.csv");
+    std::fs::write(&perfect_path, perfect).unwrap();
+    let out = dir.path().join("worse");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_calibrate"))
+        .args([
+            "--data".as_ref(),
+            perfect_path.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+        .args(["--method", "residual-ridge", "--split", "0.1,0.1,0.8"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    eprintln!("{stderr}{}", report["test"]);
+    assert!(output.status.success(), "{stderr}");
+    assert!(report["worse_than_nominal"].as_bool().unwrap());
+    assert!(
+        stderr.contains("warning: the calibrated model is WORSE"),
+        "{stderr}"
+    );
 }

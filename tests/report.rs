@@ -256,7 +256,7 @@ fn metrics_header_is_exact() {
     let (header, rows) = parse_csv(&metrics_csv(&study(false)).unwrap());
     assert_eq!(
         header,
-        "scenario,region,distribution,method,n_train,seed,status,test_mean_mm,test_max_mm,test_std_mm,\
+        "scenario,region,distribution,method,n_train,seed,status,worse_than_nominal,test_mean_mm,test_max_mm,test_std_mm,\
          test_rms_mm,test_p95_mm,truth_mean_mm,truth_max_mm,truth_p95_mm,outside_mean_mm,\
          closed_loop_mean_mm,floor_mean_mm,o1,o2,o3,logdet,fit_ms"
             .split(',')
@@ -265,7 +265,7 @@ fn metrics_header_is_exact() {
     assert_eq!(rows.len(), 2 * 3 * 4 * SEEDS as usize);
     let (header, _) = parse_csv(&metrics_csv(&study(true)).unwrap());
     assert_eq!(
-        &header[23..],
+        &header[24..],
         [
             "test_ori_mean_rad",
             "test_ori_max_rad",
@@ -559,4 +559,30 @@ fn plots_are_pngs_and_write_into_a_subdirectory() {
     if let Ok(out) = std::env::var("REPORT_TEST_OUT") {
         calibench::output::write_files(Path::new(&out), &files).unwrap();
     }
+}
+
+/// A calibration worse than nominal on the same campaign is flagged in `metrics.csv` and counted in
+/// `summary.md`: here `paper-rotxyz` at 30 points (0.50 against 0.40 mm), and nothing else.
+#[test]
+fn runs_worse_than_nominal_are_flagged() {
+    let s = study(false);
+    let (_, rows) = parse_csv(&metrics_csv(&s).unwrap());
+    let mut flagged = 0;
+    for r in &rows {
+        let expected = match (r["method"].as_str(), r["n_train"].as_str()) {
+            ("nominal", _) => "",
+            _ if r["status"] != "ok" => "",
+            ("paper-rotxyz", "30") => "true",
+            _ => "false",
+        };
+        assert_eq!(r["worse_than_nominal"], expected, "{r:?}");
+        flagged += usize::from(expected == "true");
+    }
+    assert_eq!(flagged, 2 * SEEDS as usize * s.regions.len());
+    let summary = calibench::report::summary::summary_md(&s).unwrap();
+    assert!(
+        summary.contains(&format!("**{flagged} runs end worse than `nominal`**"))
+            && summary.contains("`paper-rotxyz` at 30 points"),
+        "{summary}"
+    );
 }

@@ -82,6 +82,11 @@ pub struct CalibrationReport {
     /// Against the ground truth, with `--truth`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<BeforeAfterSummary>,
+    /// Whether the calibrated model's test mean (position, or orientation where measured) is above the
+    /// nominal model's: a calibration that makes the arm worse.
+    pub worse_than_nominal: bool,
+    /// What the user must know before trusting the result, one sentence each (also printed as `warning:`).
+    pub warnings: Vec<String>,
 }
 
 /// A registration as `report.json` shows it.
@@ -251,7 +256,13 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             _ => Map::new(),
         },
         truth: None,
+        worse_than_nominal: false,
+        warnings: Vec::new(),
     };
+    report
+        .warnings
+        .extend(worse_than_nominal(&report.test, &what_test(&report)));
+    report.worse_than_nominal = !report.warnings.is_empty();
     let truth_errors = match &truth {
         Some(t) => {
             let t_test = t.subset(&parts.test_indices);
@@ -304,6 +315,38 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         tables,
         out: options.out.clone(),
     })
+}
+
+/// What the test set is, for a warning.
+fn what_test(report: &CalibrationReport) -> String {
+    match &report.test_data {
+        Some(t) => format!("on {t}"),
+        None => "on the test split".into(),
+    }
+}
+
+/// A warning per quantity (position, orientation) on which the calibrated model errs more than the nominal
+/// one: the calibration makes the arm worse there.
+pub fn worse_than_nominal(test: &BeforeAfterSummary, on: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    if test.after.mean_mm > test.before.mean_mm {
+        out.push(format!(
+            "the calibrated model is WORSE than the nominal one {on}: mean position error {:.4} mm against {:.4} mm \
+             (Measured); do not use it",
+            test.after.mean_mm, test.before.mean_mm
+        ));
+    }
+    if let Some(o) = &test.orientation
+        && o.after.mean_rad > o.before.mean_rad
+    {
+        out.push(format!(
+            "the calibrated model is WORSE than the nominal one {on} in orientation: mean {:.3} mrad against {:.3} \
+             mrad (Measured)",
+            o.after.mean_rad * 1e3,
+            o.before.mean_rad * 1e3
+        ));
+    }
+    out
 }
 
 fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {

@@ -148,6 +148,9 @@ fn run(cli: Cli) -> Result<()> {
     let (r, out) = (&done.report, done.out.display());
     let (train, val, ms) = (r.n_train, r.n_val, r.fit_ms);
     println!("fit on {train} training + {val} validation points in {ms:.1} ms; wrote {out}");
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
     Ok(())
 }
 

@@ -13,6 +13,7 @@ use clap::Parser;
 use calibench::app::MAX_THREADS;
 use calibench::app::campaign::{self, CampaignRun, Options, ReplaySource};
 use calibench::eval::Stats;
+use calibench::report::metrics::worse_than_nominal;
 use calibench::scenario::Scenario;
 use calibench::{Error, Result};
 
@@ -171,11 +172,17 @@ fn print(done: &CampaignRun) {
     }
     if let Some((study, took)) = &done.study {
         let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
+        let worse = study
+            .runs
+            .iter()
+            .filter(|r| worse_than_nominal(r, study) == Some(true))
+            .count();
         println!(
-            "study: {} runs ({} failed, reasons in metrics.csv) in {:.1} s; see summary.md, answer.csv, plots/ and \
-             campaign.rrd (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
+            "study: {} runs ({} failed, reasons in metrics.csv; {} worse than nominal, flagged there) in {:.1} s; \
+             see summary.md, answer.csv, plots/ and campaign.rrd (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
             study.runs.len(),
             failed,
+            worse,
             took.as_secs_f64()
         );
         print!("{}", calibench::report::answer::answer_text(study));

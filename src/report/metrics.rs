@@ -11,7 +11,7 @@ use crate::eval::Stats;
 use crate::study::{RunMetrics, StudyResult};
 
 /// The columns of every `metrics.csv`, in order.
-pub const COLUMNS: [&str; 23] = [
+pub const COLUMNS: [&str; 24] = [
     "scenario",
     "region",
     "distribution",
@@ -19,6 +19,7 @@ pub const COLUMNS: [&str; 23] = [
     "n_train",
     "seed",
     "status",
+    "worse_than_nominal",
     "test_mean_mm",
     "test_max_mm",
     "test_std_mm",
@@ -169,6 +170,26 @@ pub fn status(run: &RunMetrics) -> String {
     }
 }
 
+/// Whether `run` ends worse than `nominal` on the same campaign (same region, layout, size and seed): its
+/// ground-truth mean, as written, above the nominal model's — a calibration that makes the arm worse. `None`
+/// for `nominal` itself, a failed run, or a study without `nominal`.
+pub fn worse_than_nominal(run: &RunMetrics, study: &StudyResult) -> Option<bool> {
+    const NOMINAL: &str = "nominal";
+    if run.key.method == NOMINAL || run.failure.is_some() {
+        return None;
+    }
+    let k = &run.key;
+    let nominal = study.runs.iter().find(|r| {
+        r.key.method == NOMINAL
+            && r.key.region == k.region
+            && r.key.distribution == k.distribution
+            && r.key.n_train == k.n_train
+            && r.key.seed == k.seed
+    })?;
+    let (a, b) = (run.truth.as_ref()?, nominal.truth.as_ref()?);
+    Some(mm(a.mean) > mm(b.mean))
+}
+
 /// `metrics.csv`: one row per run, in the study's run order.
 pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
     let data_error = |e: csv::Error| Error::Data {
@@ -188,6 +209,7 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
             k.n_train.to_string(),
             k.seed.to_string(),
             status(run),
+            worse_than_nominal(run, study).map_or(String::new(), |w| w.to_string()),
         ];
         for (name, value) in cells(run, study.orientation) {
             let text = |v: f64| {

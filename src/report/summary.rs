@@ -15,7 +15,7 @@ use super::aggregate::{
     Axes, Curve, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
 };
 use super::answer::{Answer, STATISTICS, answer_md, answers, fmt_target};
-use super::metrics::rounded;
+use super::metrics::{rounded, worse_than_nominal};
 use super::plots::file_safe;
 use super::tables::{
     accuracy_tables, compact_curves_md, fmt_mm, learning_curve_tables, outside_md, table_header,
@@ -133,10 +133,11 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
     );
     let _ = writeln!(
         out,
-        "- **Runs:** {} in all, {} failed.\n",
+        "- **Runs:** {} in all, {} failed.",
         study.runs.len(),
         failed
     );
+    let _ = writeln!(out, "- **Worse than nominal:** {}\n", worse_in_words(study));
     let _ = writeln!(
         out,
         "*Ground-truth mean*: the mean distance (mm) between where a method predicts the reflector and where it \
@@ -144,6 +145,36 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
          tracker measurements of the test points (noise included). Medians over the successful seeds; \
          [q1–q3] is the interquartile range.\n"
     );
+}
+
+/// The runs whose calibration leaves the arm worse than the nominal model on the same campaign (ground-truth
+/// mean; `metrics.csv`'s `worse_than_nominal`), counted by method and training-set size.
+pub fn worse_in_words(study: &StudyResult) -> String {
+    let mut by: Vec<(String, usize, usize)> = Vec::new();
+    for run in &study.runs {
+        if worse_than_nominal(run, study) == Some(true) {
+            match by
+                .iter_mut()
+                .find(|(m, n, _)| *m == run.key.method && *n == run.key.n_train)
+            {
+                Some(e) => e.2 += 1,
+                None => by.push((run.key.method.clone(), run.key.n_train, 1)),
+            }
+        }
+    }
+    let total: usize = by.iter().map(|e| e.2).sum();
+    if total == 0 {
+        return "no run ends worse than `nominal` on the same campaign.".into();
+    }
+    let parts: Vec<String> = by
+        .iter()
+        .map(|(m, n, c)| format!("`{m}` at {n} points: {c}"))
+        .collect();
+    format!(
+        "**{total} runs end worse than `nominal`** on the same campaign (ground-truth mean; flagged in \
+         `metrics.csv`): {}.",
+        parts.join(", ")
+    )
 }
 
 /// The verdict for one method in one region: where its curve ends, whether more points would help, and the
