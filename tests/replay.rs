@@ -28,6 +28,24 @@ fn ur10_ipa() -> Scenario {
     s
 }
 
+/// The UR10, its DH form, and the real series B, C, D read as `real_data` reads them.
+fn ur10_series() -> (
+    calibench::robot::Chain,
+    calibench::robot::dh::DhChain,
+    Vec<Dataset>,
+) {
+    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
+    let dh = calibench::robot::dh::DhChain::from_chain(&chain).unwrap();
+    let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
+    let real = calibench::app::real_data::read_series(
+        &root().join("../shared/data/ipa-ur10"),
+        &mapping,
+        &chain,
+    )
+    .unwrap();
+    (chain, dh, real)
+}
+
 fn replay(
     scenario: Scenario,
     file: &Path,
@@ -236,18 +254,14 @@ fn a_row_outside_the_joint_limits_is_an_error_naming_it() {
 /// millimetre off on the real arm, is exact on the simulated one.
 #[test]
 fn the_simulated_tables_stand_beside_the_real_ones() {
-    use calibench::app::real_data::{self, read_series};
+    use calibench::app::real_data;
     use calibench::app::sim_vs_real::{compare, simulate_series};
     use calibench::calib::method::FitContext;
     use calibench::calib::registry::MethodKind;
-    use calibench::robot::dh::DhChain;
 
-    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
-    let dh = DhChain::from_chain(&chain).unwrap();
+    let (chain, dh, real) = ur10_series();
     let ctx = FitContext::new(&chain, &dh);
-    let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
-    let real: Vec<Dataset> = read_series(&root().join("../shared/data/ipa-ur10"), &mapping, &chain)
-        .unwrap()
+    let real: Vec<Dataset> = real
         .iter()
         .map(|d| d.subset(&(0..d.len()).step_by(8).collect::<Vec<_>>()))
         .collect();
@@ -305,17 +319,13 @@ fn the_simulated_tables_stand_beside_the_real_ones() {
 /// or the protocol that would silently undo it.
 #[test]
 fn the_fitted_ur10_errs_like_the_real_one() {
-    use calibench::app::real_data::{self, read_series};
+    use calibench::app::real_data;
     use calibench::app::sim_vs_real::{compare, simulate_series};
     use calibench::calib::method::FitContext;
     use calibench::calib::registry::MethodKind as M;
-    use calibench::robot::dh::DhChain;
 
-    let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
-    let dh = DhChain::from_chain(&chain).unwrap();
+    let (chain, dh, real) = ur10_series();
     let ctx = FitContext::new(&chain, &dh);
-    let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
-    let real = read_series(&root().join("../shared/data/ipa-ur10"), &mapping, &chain).unwrap();
     let (sim, _) = simulate_series(&ur10_ipa(), &real).unwrap();
     for s in &sim {
         assert!(
