@@ -73,6 +73,12 @@ const PAPER_POSE: &str = include_str!("../../scenarios/paper_iiwa_pose.toml");
 /// `paper_iiwa_pose.toml` (its nest, payload and region) with the `[truth]` and `[tracker]` of
 /// `ideal_elastic.toml`: a full-pose campaign of a robot the `elastic` model describes exactly.
 pub fn ideal_elastic_pose() -> String {
+    with_ideal_truth(PAPER_POSE)
+}
+
+/// `scenario` (a scenario's text) with `ideal_elastic.toml`'s `[truth]` and `[tracker]` in place of its own:
+/// the truth `elastic` describes exactly, for tests whose claim is the harness's consistency.
+pub fn with_ideal_truth(scenario: &str) -> String {
     let span = |text: &str| {
         let start = text.find("\n[truth]\n").expect("a [truth] section");
         let end = text
@@ -80,12 +86,12 @@ pub fn ideal_elastic_pose() -> String {
             .expect("a [reflectors] section");
         (start, end)
     };
-    let (a, b) = span(PAPER_POSE);
+    let (a, b) = span(scenario);
     let (c, d) = span(IDEAL_ELASTIC);
     format!(
         "{}{}{}",
-        &PAPER_POSE[..a],
+        &scenario[..a],
         &IDEAL_ELASTIC[c..d],
-        &PAPER_POSE[b..]
+        &scenario[b..]
     )
 }
