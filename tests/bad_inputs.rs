@@ -583,7 +583,15 @@ fn concurrent_runs_into_one_directory_leave_one_result_never_a_mix() {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         names.sort();
-        assert_eq!(names, ["model.json", "predictions.csv", "report.json"]);
+        assert_eq!(
+            names,
+            [
+                "model.json",
+                "predictions.csv",
+                "report.json",
+                "test_points.csv"
+            ]
+        );
         let json = |name: &str| -> serde_json::Value {
             serde_json::from_slice(&std::fs::read(out.join(name)).unwrap()).unwrap()
         };

@@ -522,7 +522,9 @@ fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
                 q.to_bits(),
                 "point {point} {joint}: input not echoed"
             );
-            let cmd: f64 = row[applied.col(&format!("cmd_{joint}"))].parse().unwrap();
+            let cmd: f64 = row[applied.col(&format!("cmd_{joint}"))]
+                .parse()
+                .unwrap_or_else(|_| panic!("point {point}: no command: {:?}", row));
             assert!(cmd.is_finite(), "point {point} cmd_{joint} = {cmd}");
             largest_change = largest_change.max((cmd - q).abs());
         }
@@ -704,7 +706,9 @@ fn repeated_fits_are_byte_identical() {
 
 /// A configuration where the inverse is undefined (the iiwa standing straight up: joints 2, 4 and 6 at zero put
 /// axes 1, 3, 5 and 7 on one line) gets its prediction and an empty command with the reason; the others are
-/// commanded as usual, and the file is written.
+/// commanded as usual, and the file is written. The straight arm lies far outside the campaign's domain, where
+/// `paper-rotxyz`'s regressions fade out to their constant parts (issue 13); there the inverse either reaches
+/// the target (the aligned axes 1, 3, 5, 7 share the correction) or is refused as singular.
 #[test]
 fn apply_reports_a_singular_configuration_per_row() {
     let dir = tempfile::tempdir().unwrap();
@@ -735,11 +739,17 @@ fn apply_reports_a_singular_configuration_per_row() {
     assert_eq!(rows.len(), 2);
     let (straight, bent) = (&rows[0], &rows[1]);
     assert!(
-        straight[col("status")].starts_with("no command"),
-        "{:?}",
-        straight
+        straight[col("domain")].starts_with("outside: "),
+        "{straight:?}"
     );
-    assert!(straight[col("cmd_iiwa_joint_1")].is_empty());
+    let status = &straight[col("status")];
+    if status == "ok" {
+        let r: f64 = straight[col("compensation_residual_m")].parse().unwrap();
+        assert!(r <= 1e-9, "{straight:?}");
+    } else {
+        assert!(status.starts_with("no command"), "{straight:?}");
+        assert!(straight[col("cmd_iiwa_joint_1")].is_empty());
+    }
     assert!(
         straight[col("predicted_x")]
             .parse::<f64>()

@@ -503,3 +503,75 @@ fn apply_reads_through_the_mapping() {
     );
     assert_eq!(lines.count(), 17);
 }
+
+/// Trained on C, applied to D (other shoulder ranges and elbow branches): `test_points.csv` marks the points
+/// outside C's domain, `report.json` counts them and a `warning:` line says so; the regression is not
+/// extrapolated there, so `residual-ridge` errs no more than 10 % above `nominal` on D.
+#[test]
+fn the_status_column_marks_points_outside_the_training_domain() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out");
+    let mapping = Path::new(env!("CARGO_MANIFEST_DIR")).join("mappings/ipa_ur10.toml");
+    let (c, d) = (series("C"), series("D"));
+    let output = run(&[
+        "--robot".as_ref(),
+        "robots/ur10.urdf".as_ref(),
+        "--mapping".as_ref(),
+        mapping.as_os_str(),
+        "--data".as_ref(),
+        c.as_os_str(),
+        "--test-data".as_ref(),
+        d.as_os_str(),
+        "--method".as_ref(),
+        "residual-ridge".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let text = std::fs::read_to_string(out.join("test_points.csv")).unwrap();
+    let mut rows = csv::Reader::from_reader(text.as_bytes());
+    let status = rows
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "status")
+        .unwrap();
+    let statuses: Vec<String> = rows
+        .records()
+        .map(|r| r.unwrap()[status].to_string())
+        .collect();
+    let outside = statuses
+        .iter()
+        .filter(|s| s.starts_with("outside: "))
+        .count();
+    let inside = statuses.iter().filter(|s| *s == "inside").count();
+    eprintln!(
+        "C → D: {outside} of {} outside ({}), residual-ridge {} mm against nominal {} mm",
+        statuses.len(),
+        statuses.iter().find(|s| s.starts_with("outside")).unwrap(),
+        report["test"]["after"]["mean_mm"],
+        report["test"]["before"]["mean_mm"]
+    );
+    assert_eq!(statuses.len(), 632);
+    assert_eq!(outside + inside, 632);
+    // D leaves C's shoulder-pan range at most of its points.
+    assert!(outside > 300, "{outside}");
+    assert_eq!(
+        report["test_outside_domain"].as_u64().unwrap() as usize,
+        outside
+    );
+    assert!(
+        stderr.contains(&format!(
+            "warning: {outside} of 632 test points lie outside"
+        )),
+        "{stderr}"
+    );
+    let (after, before) = (
+        report["test"]["after"]["mean_mm"].as_f64().unwrap(),
+        report["test"]["before"]["mean_mm"].as_f64().unwrap(),
+    );
+    assert!(after <= 1.1 * before, "{after} vs nominal {before}");
+}

@@ -24,6 +24,8 @@ use crate::output;
 use crate::robot::dh::DhChain;
 use crate::robot::{Payload, urdf};
 
+use super::test_points;
+
 /// What to fit and where to test it (the flags of `calibrate`).
 #[derive(Clone, Debug)]
 pub struct FitOptions {
@@ -87,6 +89,8 @@ pub struct CalibrationReport {
     pub worse_than_nominal: bool,
     /// What the user must know before trusting the result, one sentence each (also printed as `warning:`).
     pub warnings: Vec<String>,
+    /// Test points outside the model's training domain (`test_points.csv`).
+    pub test_outside_domain: usize,
 }
 
 /// A registration as `report.json` shows it.
@@ -129,9 +133,14 @@ pub struct FitOutcome {
 }
 
 /// The files a fit writes.
-const FIT_OUTPUTS: [&str; 3] = ["report.json", "model.json", "predictions.csv"];
+const FIT_OUTPUTS: [&str; 4] = [
+    "report.json",
+    "model.json",
+    "predictions.csv",
+    "test_points.csv",
+];
 
-/// Fits `options.method` and writes `report.json`, `model.json` and `predictions.csv` into `options.out`,
+/// Fits `options.method` and writes `report.json`, `model.json`, `predictions.csv` and `test_points.csv` into `options.out`,
 /// all or none.
 pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     output::check_dir(&options.out, &FIT_OUTPUTS)?;
@@ -258,6 +267,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         truth: None,
         worse_than_nominal: false,
         warnings: Vec::new(),
+        test_outside_domain: 0,
     };
     report
         .warnings
@@ -280,6 +290,25 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         None => None,
     };
 
+    // Per test point: inside the model's training domain or not (outside, its regression is left out).
+    let placements: Vec<_> = (0..test.len())
+        .map(|i| test_points::place(model, &test.q[i], test.extra_inputs_of(i)))
+        .collect();
+    let (test_points_file, outside) = test_points::test_points_csv(
+        &test.point_ids,
+        &placements,
+        &test_errors.before,
+        &test_errors.after,
+    )?;
+    report.test_outside_domain = outside;
+    if outside > 0 {
+        report.warnings.push(format!(
+            "{outside} of {} test points lie outside the model's training domain (joint or input ranges, or \
+             far from every training configuration; `status` in test_points.csv); a regression is not \
+             extrapolated there, the model falls back to its parametric part",
+            test.len()
+        ));
+    }
     let predictions = predictions_csv(model, &data, &parts.labels)?;
     output::write_dir(
         &options.out,
@@ -287,6 +316,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             ("report.json", to_json(&to_value(&report)?)?),
             ("model.json", to_json(&model.save()?)?),
             ("predictions.csv", predictions),
+            ("test_points.csv", test_points_file),
         ],
         &[],
     )?;
@@ -434,6 +464,10 @@ pub struct ApplyOptions {
 #[derive(Clone, Debug)]
 pub struct ApplyOutcome {
     pub configurations: usize,
+    /// Configurations outside the model's training domain (the `domain` column).
+    pub outside_domain: usize,
+    /// What the user must know, one sentence each (printed as `warning:`).
+    pub warnings: Vec<String>,
     /// Configurations without a corrected command: the inverse is undefined there.
     pub without_command: usize,
     pub out: PathBuf,
@@ -477,10 +511,12 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
     header.push("compensation_residual_m".into());
     header.push("status".into());
+    header.push("domain_distance_rad".into());
+    header.push("domain".into());
     w.write_record(&header).map_err(csv_err)?;
     // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
     // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
-    let mut singular = 0;
+    let (mut singular, mut outside) = (0, 0);
     for (id, q) in ids.iter().zip(&configurations) {
         let p = model.predict(q);
         let r: UnitQuaternion<f64> = p.orientation;
@@ -500,6 +536,11 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
                 row.push(format!("no command: {}", e.detail()));
             }
         }
+        // Extra inputs are not read here: the model takes their training means, always inside.
+        let placement = test_points::place(model.as_ref(), q, &[]);
+        outside += usize::from(!placement.inside);
+        row.push(placement.distance_rad.to_string());
+        row.push(test_points::domain_cell(&placement));
         w.write_record(&row).map_err(csv_err)?;
     }
     let bytes = w
@@ -509,6 +550,17 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     Ok(ApplyOutcome {
         configurations: ids.len(),
         without_command: singular,
+        outside_domain: outside,
+        warnings: (outside > 0)
+            .then(|| {
+                format!(
+                    "{outside} of {} configurations lie outside the model's training domain (column `domain`); \
+                     a regression is not extrapolated there, the model falls back to its parametric part",
+                    ids.len()
+                )
+            })
+            .into_iter()
+            .collect(),
         out: out.clone(),
     })
 }

@@ -9,6 +9,7 @@ pub mod campaign;
 pub mod real_data;
 pub mod replay;
 pub mod sim_vs_real;
+pub mod test_points;
 
 use crate::campaign::{Generator, Simulation};
 use crate::design::DOptimal;

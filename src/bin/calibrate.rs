@@ -141,6 +141,7 @@ fn run(cli: Cli) -> Result<()> {
         };
         let (n, out) = (done.configurations, done.out.display());
         println!("{n} configurations: predicted poses and corrected commands in {out}{singular}");
+        done.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
         return Ok(());
     }
     let done = calibrate::fit(&fit_options(cli.fit)?)?;
@@ -148,9 +149,7 @@ fn run(cli: Cli) -> Result<()> {
     let (r, out) = (&done.report, done.out.display());
     let (train, val, ms) = (r.n_train, r.n_val, r.fit_ms);
     println!("fit on {train} training + {val} validation points in {ms:.1} ms; wrote {out}");
-    for w in &r.warnings {
-        eprintln!("warning: {w}");
-    }
+    r.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
     Ok(())
 }
 

@@ -12,6 +12,7 @@ use std::fmt;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
+use super::domain::Domain;
 use super::error_model::ErrorModelKind;
 use super::regression::RegressionOptions;
 use super::tracker_frame::{Observation, Registration};
@@ -97,6 +98,9 @@ pub struct Basis {
     /// The nominal kinematics the method corrects (DH form of the robot's URDF).
     pub dh: DhChain,
     pub registration: Registration,
+    /// What the model was fitted on; empty in a model saved before domains were recorded.
+    #[serde(default, skip_serializing_if = "Domain::is_empty")]
+    pub domain: Domain,
 }
 
 impl Basis {
@@ -124,7 +128,8 @@ impl Basis {
             self.joint_names.len(),
             "joint_names",
         )?;
-        plausible::within("registration", self.registration.validate())
+        plausible::within("registration", self.registration.validate())?;
+        self.domain.validate(self.joint_names.len())
     }
 }
 

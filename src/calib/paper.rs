@@ -14,6 +14,7 @@ use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use super::domain::Domain;
 use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
     select_params,
@@ -237,6 +238,7 @@ impl PaperModel {
                 joint_names: train.joint_names.clone(),
                 dh: dh.clone(),
                 registration,
+                domain: Domain::of(train, val),
             },
             candidates: train
                 .joint_names
@@ -389,9 +391,22 @@ impl PaperModel {
     }
 
     /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
+    /// Outside the training domain the regressions are evaluated as [`Domain::regression_inputs`] says.
     pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let x = self.candidates_of(q, inputs);
-        let eval = |models: &[ParameterModel]| models.iter().map(|m| m.model.predict(&x)).collect();
+        let (q, inputs, w) = self.basis.domain.regression_inputs(q, inputs);
+        let x = self.candidates_of(&q, &inputs);
+        // Weight 1 leaves the bits alone.
+        let eval = |models: &[ParameterModel]| {
+            models
+                .iter()
+                .map(|m| match w {
+                    1.0 => m.model.predict(&x),
+                    // Toward the regression's constant part (its intercept, the training mean): the
+                    // model's constant-parameter calibration.
+                    _ => m.model.intercept + w * (m.model.predict(&x) - m.model.intercept),
+                })
+                .collect()
+        };
         (eval(&self.position), eval(&self.orientation))
     }
 

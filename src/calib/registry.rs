@@ -310,6 +310,7 @@ mod tests {
                 nest: None,
                 probe_rotation: None,
             },
+            domain: Default::default(),
         };
         let paper = PaperModel {
             method: &paper::NOMINAL,

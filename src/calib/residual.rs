@@ -27,6 +27,7 @@ use nalgebra::{DMatrix, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use super::domain::Domain;
 use super::kinematic::{ELASTIC, KINEMATIC};
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
@@ -369,7 +370,7 @@ impl ResidualCorrection {
 
     /// `reference` corrected at `q` with extra inputs `inputs`.
     pub fn apply(&self, q: &[f64], inputs: &[f64], reference: &Reference) -> Reference {
-        self.apply_with_offset(q, inputs, reference).0
+        self.apply_with_offset(q, inputs, reference, 1.0).0
     }
 
     /// `reference` corrected at `q`, and the position offset added.
@@ -378,8 +379,19 @@ impl ResidualCorrection {
         q: &[f64],
         inputs: &[f64],
         reference: &Reference,
+        weight: f64,
     ) -> (Reference, Vector3<f64>) {
-        let (dp, dw) = self.correction(q, inputs);
+        let (mut dp, mut dw) = self.correction(q, inputs);
+        // Weight below 1 (outside the training domain): toward the constant part of each component's
+        // regression, its intercept (the training mean). Weight 1 leaves the bits alone.
+        if weight != 1.0 {
+            let toward = |models: &[ComponentModel], v: Vector3<f64>| {
+                let c = Vector3::from_fn(|k, _| models[k].model.intercept);
+                c + (v - c) * weight
+            };
+            dp = toward(&self.position, dp);
+            dw = dw.map(|w| toward(&self.orientation, w));
+        }
         // A zero rotation leaves the reference's bits alone, as a zero offset does.
         let orientation = match dw {
             Some(w) if w != Vector3::zeros() => UnitQuaternion::from_scaled_axis(w) * reference.1,
@@ -489,6 +501,7 @@ impl ResidualModel {
                     joint_names: train.joint_names.clone(),
                     dh: ctx.dh.clone(),
                     registration: registration.clone(),
+                    domain: Domain::of(train, val),
                 },
                 residual,
             };
@@ -557,8 +570,12 @@ impl Fitted for ResidualModel {
         self.residual.extra_inputs()
     }
 
+    /// Outside the training domain the residual is evaluated as [`Domain::regression_inputs`] says.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
-        let (position, orientation) = self.residual.apply(q, inputs, &self.reference(q));
+        let (qc, ic, w) = self.basis.domain.regression_inputs(q, inputs);
+        let ((position, orientation), _) =
+            self.residual
+                .apply_with_offset(&qc, &ic, &self.reference(q), w);
         Prediction {
             position,
             linearized_position: position,
@@ -705,10 +722,11 @@ impl Fitted for HybridFitted {
     /// inputs go to the residual model.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let p = self.base.predict(q);
+        let (qc, ic, w) = self.basis().domain.regression_inputs(q, inputs);
         let ((position, orientation), dp) =
             self.saved
                 .residual
-                .apply_with_offset(q, inputs, &(p.position, p.orientation));
+                .apply_with_offset(&qc, &ic, &(p.position, p.orientation), w);
         Prediction {
             position,
             linearized_position: p.linearized_position + dp,

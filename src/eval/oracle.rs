@@ -56,6 +56,7 @@ impl Oracle {
                     nest,
                     probe_rotation: None,
                 },
+                domain: Default::default(),
             },
             nest_rotation,
         })

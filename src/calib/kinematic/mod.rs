@@ -71,6 +71,7 @@ use problem::{Point, Problem};
 pub use solve::Termination;
 use solve::minimize;
 
+use super::domain::Domain;
 use super::error_model::{ErrorFrames, FrameErrors};
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::tracker_frame::{Observation, Registration, TrackerFrame};
@@ -332,6 +333,7 @@ impl KinematicModel {
                     nest: registration.nest,
                     probe_rotation: registration.probe_rotation,
                 },
+                domain: Domain::of(train, val),
             },
             errors: state.errors.clone(),
             compliance: elastic.then(|| state.compliance.clone()),

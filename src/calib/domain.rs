@@ -1,0 +1,233 @@
+//! What a fitted model was fitted on (issue 13): the range of every joint angle and extra input over its
+//! training and validation points, and a sample of those configurations to measure how far a new one lies.
+//! A regression evaluated outside that domain extrapolates a polynomial, so the models fade the regression
+//! out to their parametric part just beyond it (the constant part of each regression, its intercept: constant
+//! error parameters for the paper's models, a constant offset for the residual models, the base alone where
+//! a hybrid's residual has none), or
+//! farther than [`Domain::radius_rad`] from every training configuration ([`Domain::regression_inputs`]); `calibrate` says per
+//! point whether it lies inside. Measured on UR10 C → D and C → B (README): holding the inputs at the edge
+//! instead leaves `paper-rotxyz` 3.6× and `residual-ridge` 1.2× above `nominal` on D, since a polynomial at
+//! its edge still carries its steepest value, and the same joint values on another branch are another pose.
+
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::Dataset;
+use crate::error::Result;
+use crate::robot::plausible;
+
+/// How far beyond a joint's training range (rad) a regression fades out entirely.
+pub const FADE_RAD: f64 = 0.05;
+/// The same for an extra input, as a fraction of its training range.
+pub const FADE_INPUT: f64 = 0.1;
+
+/// Training configurations kept to measure distances in joint space: evenly spaced in the data's order.
+pub const SAMPLE: usize = 400;
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Domain {
+    /// Per joint, the smallest and largest training angle (rad).
+    pub joint_min: Vec<f64>,
+    pub joint_max: Vec<f64>,
+    /// Per extra input (the data's order), its training range.
+    pub input_names: Vec<String>,
+    pub input_min: Vec<f64>,
+    pub input_max: Vec<f64>,
+    /// Up to [`SAMPLE`] training configurations.
+    pub sample: Vec<Vec<f64>>,
+    /// How far (rad) from the nearest sampled configuration a point may lie and still count as inside:
+    /// twice the largest distance of a sampled configuration to its nearest neighbour among the others (the
+    /// sample's own spacing), so a point in a hole of the training data, or on another branch within the
+    /// same joint ranges, is outside.
+    #[serde(default)]
+    pub radius_rad: f64,
+}
+
+/// Where a point lies against a [`Domain`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Placement {
+    /// Every joint and extra input within its training range.
+    pub inside: bool,
+    /// The inputs outside, in words (`elbow_joint -0.52 rad outside [0.00, 2.32]`); empty inside.
+    pub outside: Vec<String>,
+    /// Joint-space distance (rad, Euclidean over the joints) to the nearest sampled training configuration.
+    pub distance_rad: f64,
+}
+
+impl Domain {
+    /// The domain of `train` and `val` together (what a method fits on).
+    pub fn of(train: &Dataset, val: &Dataset) -> Domain {
+        let n = train.joint_names.len();
+        let q: Vec<&Vec<f64>> = train.q.iter().chain(&val.q).collect();
+        let range = |values: &mut dyn Iterator<Item = f64>| {
+            values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
+        };
+        let (joint_min, joint_max) = (0..n).map(|j| range(&mut q.iter().map(|q| q[j]))).unzip();
+        let input_names = train.extra_input_names().to_vec();
+        let inputs = |d: &Dataset, k: usize| -> Vec<f64> {
+            (0..d.len()).map(|i| d.extra_inputs_of(i)[k]).collect()
+        };
+        let (input_min, input_max) = (0..input_names.len())
+            .map(|k| range(&mut inputs(train, k).into_iter().chain(inputs(val, k))))
+            .unzip();
+        let step = q.len().div_ceil(SAMPLE).max(1);
+        let sample: Vec<Vec<f64>> = q.iter().step_by(step).map(|q| q.to_vec()).collect();
+        let spacing = (0..sample.len())
+            .map(|i| {
+                (0..sample.len())
+                    .filter(|&k| k != i)
+                    .map(|k| distance(&sample[i], &sample[k]))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .filter(|d| d.is_finite())
+            .fold(0.0, f64::max);
+        Domain {
+            joint_min,
+            joint_max,
+            input_names,
+            input_min,
+            input_max,
+            sample,
+            radius_rad: 2.0 * spacing,
+        }
+    }
+
+    /// How a regression is evaluated for a point at `q` with `inputs`: the joint angles and inputs to
+    /// evaluate it at, and the weight its correction gets: 1 inside the domain, fading linearly to 0
+    /// (the model's parametric part alone) over [`FADE_RAD`] beyond the joint ranges (the inputs' ranges
+    /// over [`FADE_INPUT`] of their width), and from [`Domain::radius_rad`] to 1.25 times that away from
+    /// the training configurations. Continuous, so a controller's inverse through the model still
+    /// converges across the boundary.
+    pub fn regression_inputs(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
+        let (qc, ic) = (self.clamp_joints(q), self.clamp_inputs(inputs));
+        if self.is_empty() {
+            return (qc, ic, 1.0);
+        }
+        let beyond = distance(q, &qc) / FADE_RAD;
+        let beyond_inputs = inputs
+            .iter()
+            .zip(&ic)
+            .zip(self.input_min.iter().zip(&self.input_max))
+            .map(|((v, c), (lo, hi))| {
+                (v - c).abs() / (FADE_INPUT * (hi - lo)).max(f64::MIN_POSITIVE)
+            })
+            .fold(0.0, f64::max);
+        let far = if self.sample.is_empty() || self.radius_rad <= 0.0 {
+            0.0
+        } else {
+            (self.distance(q) - self.radius_rad).max(0.0) / (0.25 * self.radius_rad)
+        };
+        let w = (1.0 - beyond.max(beyond_inputs).max(far)).clamp(0.0, 1.0);
+        // Evaluated at the point itself, not at the edge: a polynomial held at the edge has a kink there
+        // that keeps a controller's inverse from converging for points on the edge; within the short fade
+        // it extrapolates little.
+        (q.to_vec(), inputs.to_vec(), w)
+    }
+
+    /// Joint-space distance (rad) to the nearest sampled training configuration.
+    pub fn distance(&self, q: &[f64]) -> f64 {
+        self.sample
+            .iter()
+            .map(|s| distance(s, q))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// No domain recorded (a model saved before domains were).
+    pub fn is_empty(&self) -> bool {
+        self.joint_min.is_empty()
+    }
+
+    /// `q` held at the domain's edge, joint by joint.
+    pub fn clamp_joints(&self, q: &[f64]) -> Vec<f64> {
+        clamp(q, &self.joint_min, &self.joint_max)
+    }
+
+    /// Extra inputs held at the domain's edge (empty stays empty: the model's training means).
+    pub fn clamp_inputs(&self, inputs: &[f64]) -> Vec<f64> {
+        clamp(inputs, &self.input_min, &self.input_max)
+    }
+
+    pub fn place(&self, joint_names: &[String], q: &[f64], inputs: &[f64]) -> Placement {
+        let mut outside = Vec::new();
+        let mut check = |name: &str, v: f64, lo: f64, hi: f64, unit: &str| {
+            if !(lo..=hi).contains(&v) {
+                outside.push(format!("{name} {v:.3}{unit} outside [{lo:.3}, {hi:.3}]"));
+            }
+        };
+        for (j, (&lo, &hi)) in self.joint_min.iter().zip(&self.joint_max).enumerate() {
+            if let Some(&v) = q.get(j) {
+                let name = joint_names
+                    .get(j)
+                    .cloned()
+                    .unwrap_or(format!("joint {}", j + 1));
+                check(&name, v, lo, hi, " rad");
+            }
+        }
+        if inputs.len() == self.input_names.len() {
+            for (k, name) in self.input_names.iter().enumerate() {
+                check(name, inputs[k], self.input_min[k], self.input_max[k], "");
+            }
+        }
+        let distance_rad = self.distance(q);
+        if distance_rad > self.radius_rad && !self.sample.is_empty() {
+            outside.push(format!(
+                "{distance_rad:.3} rad from the nearest training configuration (more than {:.3})",
+                self.radius_rad
+            ));
+        }
+        Placement {
+            inside: outside.is_empty(),
+            outside,
+            distance_rad,
+        }
+    }
+
+    /// A domain read from a file is usable: ranges of one length per joint (or none at all), ordered and
+    /// finite; sampled configurations of one angle per joint.
+    pub fn validate(&self, joints: usize) -> Result<()> {
+        if self.is_empty() {
+            return Ok(());
+        }
+        plausible::count("domain.joint_min", self.joint_min.len(), joints, "joints")?;
+        plausible::count("domain.joint_max", self.joint_max.len(), joints, "joints")?;
+        let k = self.input_names.len();
+        plausible::count("domain.input_min", self.input_min.len(), k, "input_names")?;
+        plausible::count("domain.input_max", self.input_max.len(), k, "input_names")?;
+        for (field, lo, hi) in [
+            ("domain.joint", &self.joint_min, &self.joint_max),
+            ("domain.input", &self.input_min, &self.input_max),
+        ] {
+            for (i, (a, b)) in lo.iter().zip(hi).enumerate() {
+                if !(a.is_finite() && b.is_finite() && a <= b) {
+                    return Err(plausible::invalid(
+                        &format!("{field}_min[{i}]"),
+                        format!("[{a}, {b}] is not a finite range"),
+                    ));
+                }
+            }
+        }
+        for (i, s) in self.sample.iter().enumerate() {
+            plausible::count(&format!("domain.sample[{i}]"), s.len(), joints, "joints")?;
+        }
+        Ok(())
+    }
+}
+
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn clamp(v: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
+    if lo.len() != v.len() {
+        return v.to_vec();
+    }
+    v.iter()
+        .zip(lo.iter().zip(hi))
+        .map(|(x, (a, b))| x.clamp(*a, *b))
+        .collect()
+}
