@@ -10,7 +10,7 @@ use crate::common::{assert_clean_failure, edit, files_under, read};
 const DEFAULT: &str = include_str!("../scenarios/default.toml");
 
 /// The default study made small: two sizes, two layouts, three methods, two seeds, small shared sets.
-fn small_study() -> String {
+pub fn small_study() -> String {
     let mut text = edit(
         DEFAULT,
         "sizes = [15, 30, 60, 125, 250, 500, 1000]",

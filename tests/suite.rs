@@ -23,6 +23,7 @@ mod report;
 mod residual;
 mod robot;
 mod robustness;
+mod shards;
 mod study;
 mod study_cli;
 mod tracker;

@@ -11,8 +11,9 @@ use crate::campaign::Simulation;
 use crate::error::{Error, Result};
 use crate::eval::{self, Budget, Evaluation, Stats};
 use crate::scenario::Scenario;
-use crate::study::StudyResult;
+use crate::study::shard::assemble;
 use crate::study::sweep::{self, Progress};
+use crate::study::{StudyPart, StudyResult};
 use crate::{measurements, output, report};
 
 /// Every file a campaign may write at the top of its directory; a rerun replaces any of them (a file the
@@ -42,6 +43,9 @@ pub struct Options {
     pub replay: Option<ReplaySource>,
     /// Run a study above the time budget ([`super::STUDY_BUDGET_S`]).
     pub long: bool,
+    /// The study's runs as computed by shards ([`super::shard::merge`]): the study is assembled from them
+    /// instead of being run.
+    pub parts: Option<Vec<StudyPart>>,
 }
 
 /// A real campaign to replay: the file, and the column mapping it is read through (a `measurements.csv`
@@ -75,7 +79,9 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     if let Some(out) = &options.out {
         output::check_dir(out, OUTPUTS)?;
     }
-    super::check_study_budget(&scenario, rayon::current_num_threads(), options.long)?;
+    if options.parts.is_none() {
+        super::check_study_budget(&scenario, rayon::current_num_threads(), options.long)?;
+    }
     let started = Instant::now();
     let (sim, replay) = match &options.replay {
         None => (super::simulate(&scenario)?, None),
@@ -163,13 +169,16 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         Some(_) => {
             let started = Instant::now();
             let config = super::study_config(&scenario)?;
-            let mut study = sweep::run_study(
-                world,
-                &scenario.campaign,
-                &scenario.regions,
-                config,
-                Progress::Auto,
-            )?;
+            let mut study = match &options.parts {
+                Some(parts) => assemble(world, &scenario.regions, config, parts.clone()),
+                None => sweep::run_study(
+                    world,
+                    &scenario.campaign,
+                    &scenario.regions,
+                    config,
+                    Progress::Auto,
+                )?,
+            };
             if !options.timings {
                 study.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
             }

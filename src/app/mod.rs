@@ -8,6 +8,7 @@ pub mod calibrate;
 pub mod campaign;
 pub mod real_data;
 pub mod replay;
+pub mod shard;
 pub mod sim_vs_real;
 pub mod test_points;
 

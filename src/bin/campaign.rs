@@ -1,9 +1,11 @@
-//! `campaign [SCENARIO.toml] [--out DIR] [--threads N] [--replay FILE [--mapping MAP]]`: simulates a
+//! `campaign [SCENARIO.toml] [--out DIR] [--threads N] [--replay FILE [--mapping MAP]] [--shard K/N]`, or
+//! `campaign merge SHARD_DIR... [--out DIR]`: simulates a
 //! laser-tracker campaign of a robot whose true errors are known, and writes `measurements.csv`, `truth.csv`
 //! and `campaign.json`; with an `[evaluation]` section it then fits the listed methods, judges them against
 //! the truth and writes `evaluation.json` beside them. `--replay` measures a real campaign's joint
 //! configurations instead of the scenario's regions, in the file's order, with the tracker where the real one
-//! stood.
+//! stood. `--shard K/N` runs one shard of the study and `merge` puts the shards' results together
+//! (`app::shard`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -12,9 +14,11 @@ use clap::Parser;
 
 use calibench::app::MAX_THREADS;
 use calibench::app::campaign::{self, CampaignRun, Options, ReplaySource};
+use calibench::app::shard;
 use calibench::eval::Stats;
 use calibench::report::metrics::worse_than_nominal;
 use calibench::scenario::Scenario;
+use calibench::study::Shard;
 use calibench::{Error, Result};
 
 /// The scenario run when none is given: the study a user should run first.
@@ -24,9 +28,12 @@ const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
 #[command(
     version,
     about = "Simulate a laser-tracker calibration campaign with known true robot errors",
-    allow_negative_numbers = true
+    allow_negative_numbers = true,
+    args_conflicts_with_subcommands = true
 )]
 struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
     /// Scenario file (TOML); the embedded default study (`scenarios/default.toml`) when omitted.
     scenario: Option<PathBuf>,
     /// Output directory [default: results/<scenario name>].
@@ -53,6 +60,28 @@ struct Args {
     /// Run a study whose estimated time exceeds the budget of one hour.
     #[arg(long)]
     long: bool,
+    /// Run only shard K of N of the study (its campaigns with index i mod N = K) and write a shard directory
+    /// (shard.json, study.cbor, metrics.csv) [default --out: results/<scenario name>-shard-K-of-N]; put the
+    /// shards together with `campaign merge`.
+    #[arg(long, value_name = "K/N", conflicts_with = "replay")]
+    shard: Option<String>,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum Command {
+    /// Merge the shard directories of one study (`--shard K/N` runs) into the files of an unsharded run:
+    /// metrics.csv, summary.md, answer.csv, plots and campaign.rrd, plus the scenario's own campaign files.
+    Merge {
+        /// Every shard's directory, each once.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output directory [default: results/<scenario name>, relative to the current directory].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads [default: SLURM_CPUS_PER_TASK when set, else all cores].
+        #[arg(long)]
+        threads: Option<usize>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -66,11 +95,24 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: &Args) -> Result<()> {
-    if let Some(n) = args.threads {
+/// Sets the worker count: `--threads`, else `SLURM_CPUS_PER_TASK` (what a Slurm job was given), else every core.
+fn threads(flag: Option<usize>) -> Result<()> {
+    let n = match flag {
+        Some(n) => Some((n, "--threads".to_string())),
+        None => match std::env::var("SLURM_CPUS_PER_TASK") {
+            Ok(v) => Some((
+                v.trim().parse().map_err(|_| {
+                    Error::Invalid(format!("SLURM_CPUS_PER_TASK='{v}' is not a thread count"))
+                })?,
+                "SLURM_CPUS_PER_TASK".to_string(),
+            )),
+            Err(_) => None,
+        },
+    };
+    if let Some((n, from)) = n {
         if !(1..=MAX_THREADS).contains(&n) {
             return Err(Error::Invalid(format!(
-                "--threads {n}: between 1 and {MAX_THREADS}"
+                "{from} {n}: between 1 and {MAX_THREADS}"
             )));
         }
         rayon::ThreadPoolBuilder::new()
@@ -78,10 +120,49 @@ fn run(args: &Args) -> Result<()> {
             .build_global()
             .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?;
     }
+    Ok(())
+}
+
+fn run(args: &Args) -> Result<()> {
+    if let Some(Command::Merge {
+        dirs,
+        out,
+        threads: t,
+    }) = &args.command
+    {
+        threads(*t)?;
+        let done = shard::merge(dirs, out.clone())?;
+        println!("merged {} shard directories", dirs.len());
+        print(&done);
+        return Ok(());
+    }
+    threads(args.threads)?;
     let scenario = match &args.scenario {
         Some(path) => Scenario::load(path)?,
         None => Scenario::parse(DEFAULT_SCENARIO, "embedded default.toml")?,
     };
+    if let Some(text) = &args.shard {
+        let which = Shard::parse(text).map_err(Error::Invalid)?;
+        let done = shard::run_shard(
+            &scenario,
+            which,
+            args.out.as_deref(),
+            args.timings,
+            args.long,
+        )?;
+        println!(
+            "scenario '{}', shard {}: {} of {} campaigns, {} runs ({} failed) in {}; merge every shard's \
+             directory with `campaign merge`",
+            done.scenario,
+            done.shard,
+            done.campaigns,
+            done.total_campaigns,
+            done.runs,
+            done.failed,
+            done.out.display()
+        );
+        return Ok(());
+    }
     let options = Options {
         out: args.out.clone(),
         timings: args.timings,
@@ -90,6 +171,7 @@ fn run(args: &Args) -> Result<()> {
             mapping: args.mapping.clone(),
         }),
         long: args.long,
+        parts: None,
     };
     let done = campaign::run(scenario, &options)?;
     print(&done);

@@ -15,7 +15,7 @@
 //! logdet = −∞: the singular values below [`RANK_REL`] of the largest are zero, not rounding noise.
 
 use nalgebra::DMatrix;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::numeric;
 
@@ -23,7 +23,7 @@ use crate::numeric;
 pub const RANK_REL: f64 = 1e-10;
 
 /// The indices of one campaign for one model.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Indices {
     /// Points and parameters.
     pub points: usize,

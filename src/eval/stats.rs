@@ -1,9 +1,9 @@
 //! Summary statistics of a set of errors (Tables 1 and 2 of the paper, plus RMS and 95th percentile).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// In the unit of the values (SI inside the code; reports convert).
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Stats {
     pub n: usize,
     pub mean: f64,

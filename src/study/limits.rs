@@ -4,7 +4,7 @@
 //! the tracker's noise is reached only on average, never verified point by point.
 
 use nalgebra::Point3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::campaign::Campaign;
 use crate::robot::kinematics::{Frames, forward_kinematics, point_jacobian};
@@ -15,7 +15,7 @@ use crate::world::World;
 const MEAN_NORM_PER_SIGMA: f64 = 1.595_769_121_605_730_8;
 
 /// The limits of one region, over its test set (m).
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Limits {
     pub region: String,
     /// Mean 3-D length of the tracker's random error on one point.

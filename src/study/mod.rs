@@ -19,14 +19,16 @@ pub mod config;
 pub mod limits;
 mod measure;
 mod progress;
+pub mod shard;
 pub mod sweep;
 
 pub use config::StudyConfig;
 pub use limits::Limits;
+pub use shard::{Shard, StudyPart};
 
 /// Ground-truth errors of one run in one band of distance from its training region, over the ground-truth
 /// points (grid and shell) of one region where the calibration is used.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct DistanceBand {
     pub use_region: String,
     /// Band of distance from the training region's box (m): `from < d ≤ to`; `from = to = 0` is inside,
@@ -49,7 +51,7 @@ pub struct RunKey {
 }
 
 /// One run's outcome: a `metrics.csv` row. Statistics in metres and radians.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct RunMetrics {
     pub key: RunKey,
     /// `None` when the run succeeded; the reason when it failed (the sweep goes on).
@@ -77,14 +79,14 @@ pub struct RunMetrics {
 }
 
 /// Per-point errors of one view, for histograms (m).
-#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct BeforeAfter {
     pub before: Vec<f64>,
     pub after: Vec<f64>,
 }
 
 /// One measured point of the detail campaign, in the world frame.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct DetailPoint {
     pub q_cmd: Vec<f64>,
     /// True flange pose (the robot drawn at this point).
@@ -98,7 +100,7 @@ pub struct DetailPoint {
 }
 
 /// A ground-truth grid point with the detail method's residual error.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct GridPoint {
     pub true_position: Point3<f64>,
     /// |prediction − truth| of the detail method (m).
@@ -106,7 +108,7 @@ pub struct GridPoint {
 }
 
 /// The run shown point by point: the largest size, the first layout and seed, of the first region.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Detail {
     pub region: String,
     pub distribution: DistributionKind,

@@ -14,7 +14,6 @@
 //! [`DistributionKind::ALL`] and the size and seed values, not their places in the lists — so a run gives the
 //! same numbers whatever else the study lists, and whatever the thread count.
 
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
@@ -25,6 +24,7 @@ use super::measure::{
 };
 pub use super::progress::Progress;
 use super::progress::{Counter, run_weight};
+use super::shard::{Shard, StudyPart, assemble};
 use super::{
     BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
     StudyResult,
@@ -101,6 +101,20 @@ pub fn run_study(
     config: &StudyConfig,
     progress: Progress,
 ) -> Result<StudyResult> {
+    let part = run_part(world, campaign, regions, config, progress, Shard::WHOLE)?;
+    Ok(assemble(world, regions, config, vec![part]))
+}
+
+/// [`run_study`] restricted to the campaigns of `shard` ([`super::shard`]): their runs, the detail run if the
+/// shard holds it, and the limits; [`assemble`] puts the parts of every shard together.
+pub fn run_part(
+    world: &World,
+    campaign: &CampaignConfig,
+    regions: &[RegionConfig],
+    config: &StudyConfig,
+    progress: Progress,
+    shard: Shard,
+) -> Result<StudyPart> {
     config
         .validate(regions)
         .map_err(|message| Error::Invalid(format!("study.{message}")))?;
@@ -186,6 +200,12 @@ pub fn run_study(
             }
         }
     }
+    let total_campaigns = jobs.len();
+    let (held, jobs): (Vec<usize>, Vec<Job>) = jobs
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| shard.holds(*i))
+        .unzip();
     let total_work = jobs
         .iter()
         .map(|j| kinds.len() as u64 * run_weight(config, config.sizes[j.size]))
@@ -224,29 +244,13 @@ pub fn run_study(
         }
     }
     keyed.sort_by_key(|(k, _)| *k);
-    let runs: Vec<RunMetrics> = keyed.into_iter().map(|(_, run)| run).collect();
-    let limits = shared.regions.iter().map(|r| r.limits.clone()).collect();
-    let detail = details
-        .into_iter()
-        .max_by_key(|d| d.n_train)
-        .unwrap_or_else(|| Detail {
-            region: regions[0].name.clone(),
-            distribution: config.distributions[0],
-            method: config.methods[detail_method].clone(),
-            n_train: config.sizes.iter().copied().max().unwrap_or(0),
-            points: Vec::new(),
-            grid: Vec::new(),
-            histograms: BTreeMap::new(),
-            tracker: world.tracker.pose,
-        });
-    Ok(StudyResult {
-        world: world.config.clone(),
-        config: config.clone(),
-        regions: regions.to_vec(),
-        runs,
-        detail,
-        orientation: world.mounting.count() >= 3,
-        limits,
+    Ok(StudyPart {
+        shard,
+        campaigns: held,
+        total_campaigns,
+        runs: keyed.into_iter().map(|(_, run)| run).collect(),
+        detail: details.into_iter().max_by_key(|d| d.n_train),
+        limits: shared.regions.iter().map(|r| r.limits.clone()).collect(),
     })
 }
 
