@@ -13,7 +13,7 @@ use crate::calib::registry::MethodKind;
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::eval::EvaluationConfig;
-use crate::robot::{Chain, urdf};
+use crate::robot::Chain;
 use crate::study::StudyConfig;
 use crate::tracker::TrackerConfig;
 use crate::tracker::reflector::ReflectorConfig;
@@ -158,7 +158,7 @@ impl Scenario {
 
     /// Loads the scenario's robot and checks the fields that depend on it (joint counts).
     pub fn load_robot(&self) -> Result<Chain> {
-        let chain = urdf::load_file(&self.robot.urdf, self.robot.flange_link.as_deref())?;
+        let chain = crate::robot::load(&self.robot.urdf, self.robot.flange_link.as_deref())?;
         let scenario_err = |message: String| Error::Scenario {
             origin: self.origin.clone(),
             message,

@@ -22,6 +22,7 @@ mod replay;
 mod report;
 mod residual;
 mod robot;
+mod robot_toml;
 mod robustness;
 mod shards;
 mod study;

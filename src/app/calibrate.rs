@@ -21,8 +21,8 @@ use crate::eval::split::SplitRule;
 use crate::eval::tables::{BeforeAfter, BeforeAfterSummary};
 use crate::eval::transfer::{self, TestRegistration};
 use crate::output;
+use crate::robot::Payload;
 use crate::robot::dh::DhChain;
-use crate::robot::{Payload, urdf};
 
 use super::test_points;
 
@@ -144,7 +144,7 @@ const FIT_OUTPUTS: [&str; 4] = [
 /// all or none.
 pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     output::check_dir(&options.out, &FIT_OUTPUTS)?;
-    let chain = urdf::load_file(&options.robot, options.flange_link.as_deref())?;
+    let chain = crate::robot::load(&options.robot, options.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = options
         .mapping

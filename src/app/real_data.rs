@@ -28,8 +28,8 @@ use crate::eval::split::SplitRule;
 use crate::eval::transfer::TestRegistration;
 use crate::eval::{Stats, centre};
 use crate::output;
+use crate::robot::Chain;
 use crate::robot::dh::DhChain;
-use crate::robot::{Chain, urdf};
 
 /// The files of the three series, under the data set's directory.
 pub const SERIES: [(&str, &str); 3] = [
@@ -106,7 +106,19 @@ impl Options {
 pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     options.validate()?;
     output::check_dir(&options.out, &["real_data.json"])?;
-    let chain = urdf::load_file(&options.robot, None)?;
+    if !options.data_dir.is_dir() {
+        return Err(Error::Data {
+            origin: options.data_dir.display().to_string(),
+            message: format!(
+                "no such directory (looked for from {}): pass the IPA UR10 data set's directory (holding \
+                 Series_B, Series_C, Series_D) with --data-dir",
+                std::env::current_dir()
+                    .map(|d| d.display().to_string())
+                    .unwrap_or_else(|_| "the current directory".into())
+            ),
+        });
+    }
+    let chain = crate::robot::load(&options.robot, None)?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = ColumnMapping::load(&options.mapping)?;
     let series = read_series(&options.data_dir, &mapping, &chain)?;

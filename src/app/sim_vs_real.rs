@@ -22,7 +22,6 @@ use crate::error::{Error, Result};
 use crate::eval::protocol::METHODS;
 use crate::output;
 use crate::robot::dh::DhChain;
-use crate::robot::urdf;
 use crate::scenario::Scenario;
 
 /// Where a series' replay put the tracker and the probe.
@@ -208,7 +207,7 @@ fn csv(lines: &[Line]) -> Result<Vec<u8>> {
 /// `options.out`. Returns the JSON file's path.
 pub fn run(options: &Options, scenario: &Path, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     let scenario = Scenario::load(scenario)?;
-    let chain = urdf::load_file(&options.robot, None)?;
+    let chain = crate::robot::load(&options.robot, None)?;
     let simulated = scenario.load_robot()?;
     if simulated.joint_names() != chain.joint_names() {
         return Err(Error::Scenario {

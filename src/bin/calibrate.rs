@@ -64,7 +64,9 @@ struct FitArgs {
     /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
     #[arg(long)]
     ignore_inputs: bool,
-    /// The robot's URDF; its joint names name the joint columns.
+    /// The robot: a URDF, or a DH description (.toml, see robots/README.md); its joint names name the joint
+    /// columns. `robots/iiwa7.urdf`, `robots/ur10.urdf`, `robots/ur5.urdf` and `robots/ur5.toml` are built in:
+    /// they work from any directory.
     #[arg(long, default_value = "robots/iiwa7.urdf")]
     robot: PathBuf,
     /// The link carrying the reflectors [default: the chain's last link].
@@ -82,7 +84,8 @@ struct FitArgs {
     /// Ground truth (`truth.csv` of a simulated campaign) to evaluate against.
     #[arg(long)]
     truth: Option<PathBuf>,
-    /// Output directory.
+    /// Output directory, relative to the current directory: model.json, report.json, predictions.csv and
+    /// test_points.csv, replaced all at once.
     #[arg(long, default_value = "results/calibrate")]
     out: PathBuf,
     /// Train, validation and test fractions, used when the data has no `split` column.
@@ -111,7 +114,8 @@ struct ApplyArgs {
     /// inputs such as the temperature take their training means).
     #[arg(long)]
     mapping: Option<PathBuf>,
-    /// Output CSV.
+    /// Output CSV (relative to the current directory): predicted poses, corrected commands and each row's
+    /// domain status.
     #[arg(long, default_value = "results/calibrate/applied.csv")]
     out: PathBuf,
 }

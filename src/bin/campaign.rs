@@ -36,7 +36,9 @@ struct Args {
     command: Option<Command>,
     /// Scenario file (TOML); the embedded default study (`scenarios/default.toml`) when omitted.
     scenario: Option<PathBuf>,
-    /// Output directory [default: results/<scenario name>].
+    /// Output directory [default: results/<scenario name>, relative to the current directory]: measurements.csv,
+    /// truth.csv, campaign.json, and as the scenario asks evaluation.json or the study's metrics.csv,
+    /// outside.csv, answer.csv, summary.md, plots/ and campaign.rrd, replaced all at once.
     #[arg(long)]
     out: Option<PathBuf>,
     /// Worker threads (the results do not depend on it) [default: all cores].

@@ -33,13 +33,17 @@ use calibench::app::sim_vs_real;
     allow_negative_numbers = true
 )]
 struct Cli {
-    /// The data set's directory (Series_B, Series_C, Series_D).
+    /// The data set's directory (Series_B, Series_C, Series_D), relative to the current directory.
     #[arg(long, default_value = "../shared/data/ipa-ur10")]
     data_dir: PathBuf,
+    /// Column mapping of the series (built in: works from any directory).
     #[arg(long, default_value = "mappings/ipa_ur10.toml")]
     mapping: PathBuf,
+    /// The robot, URDF or DH description (.toml); the default is built in.
     #[arg(long, default_value = "robots/ur10.urdf")]
     robot: PathBuf,
+    /// Output directory, relative to the current directory: real_data.json (and sim_vs_real.json, .csv with
+    /// --simulate).
     #[arg(long, default_value = "results/real_data")]
     out: PathBuf,
     /// Draws per learning-curve size.

@@ -230,14 +230,34 @@ impl Convention {
     }
 }
 
+/// The mappings of `mappings/`, built in.
+const BUILT_IN: [(&str, &str); 1] = [(
+    "mappings/ipa_ur10.toml",
+    include_str!("../../mappings/ipa_ur10.toml"),
+)];
+
 impl ColumnMapping {
     /// Reads a mapping file.
+    /// `mappings/NAME` for a mapping shipped in `mappings/` is read from the copy built into the binary when no
+    /// such file exists (so `real_data`'s default works from any directory).
     pub fn load(path: &Path) -> Result<ColumnMapping> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Data {
-            origin: origin.clone(),
-            message: format!("cannot read: {e}"),
-        })?;
+        let text = match std::fs::read_to_string(path) {
+            Ok(text) => text,
+            Err(_) if !path.exists() && BUILT_IN.iter().any(|(n, _)| path == Path::new(n)) => {
+                let (_, text) = BUILT_IN
+                    .iter()
+                    .find(|(n, _)| path == Path::new(n))
+                    .expect("found");
+                text.to_string()
+            }
+            Err(e) => {
+                return Err(Error::Data {
+                    origin,
+                    message: format!("cannot read: {e}"),
+                });
+            }
+        };
         ColumnMapping::from_toml(&text, &origin)
     }
 

@@ -4,6 +4,7 @@
 
 pub mod chain;
 pub mod collision;
+pub mod description;
 pub mod dh;
 pub mod dynamics;
 pub mod ik;
@@ -12,4 +13,5 @@ pub mod plausible;
 pub mod urdf;
 
 pub use chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Payload, Shape};
+pub use description::load;
 pub use kinematics::{Frames, flange_pose, forward_kinematics, point_jacobian};
