@@ -14,6 +14,8 @@
 //! [position]               # the measured point (reflector, probe origin), tracker frame
 //! unit = "mm"              # m | cm | mm | um
 //! columns = ["measurement_x", "measurement_y", "measurement_z"]
+//! # difference = ["dev_x", "dev_y", "dev_z"]   # optional: measured = columns + difference_sign · difference
+//! # difference_sign = -1   # 1 (default: the difference is measured − columns) or -1 (columns − measured)
 //!
 //! [orientation]            # optional: a 6-DoF probe's orientation, tracker frame
 //! convention = "intrinsic-xyz"   # intrinsic-ABC | extrinsic-ABC (A, B, C each x, y or z) | quaternion-wxyz | quaternion-xyzw
@@ -102,8 +104,20 @@ pub struct JointColumns {
 pub struct PositionColumns {
     #[serde(default)]
     pub unit: LengthUnit,
-    /// x, y, z of the measured point in the tracker frame.
+    /// x, y, z of the measured point in the tracker frame (with `difference`: of the point it is measured
+    /// against, such as the target).
     pub columns: Vec<String>,
+    /// x, y, z of a difference column group, in `unit`: the measured point is `columns + difference_sign ·
+    /// difference` (exports that give a target and the deviation from it).
+    #[serde(default)]
+    pub difference: Option<Vec<String>>,
+    /// +1 (the difference is measured − target) or −1 (target − measured).
+    #[serde(default = "plus_one")]
+    pub difference_sign: i32,
+}
+
+fn plus_one() -> i32 {
+    1
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -292,6 +306,20 @@ impl ColumnMapping {
                 self.position.columns.len()
             ));
         }
+        if let Some(d) = &self.position.difference
+            && d.len() != 3
+        {
+            return Err(format!(
+                "[position] difference: x, y, z are 3 columns, the mapping names {}",
+                d.len()
+            ));
+        }
+        if self.position.difference_sign.abs() != 1 {
+            return Err(format!(
+                "[position] difference_sign = {}: 1 (measured = columns + difference) or -1 (columns − difference)",
+                self.position.difference_sign
+            ));
+        }
         if let Some(o) = &self.orientation {
             let convention = Convention::parse(&o.convention)?;
             if o.columns.len() != convention.columns() {
@@ -467,6 +495,15 @@ impl ColumnMapping {
             .zip(axes)
             .map(|(c, a)| table.find(c, &format!("[position] {a}")))
             .collect::<Result<Vec<_>>>()?;
+        let difference_cols = match &self.position.difference {
+            Some(d) => Some(
+                d.iter()
+                    .zip(axes)
+                    .map(|(c, a)| table.find(c, &format!("[position] difference {a}")))
+                    .collect::<Result<Vec<_>>>()?,
+            ),
+            None => None,
+        };
         let orientation = match &self.orientation {
             Some(o) => {
                 let convention = Convention::parse(&o.convention).map_err(err)?;
@@ -516,10 +553,16 @@ impl ColumnMapping {
                     .map(|(&c, s)| Ok(table.number(r, c)? * s))
                     .collect::<Result<Vec<f64>>>()?,
             );
-            let p = position_cols
+            let mut p = position_cols
                 .iter()
                 .map(|&c| Ok(table.number(r, c)? * length))
                 .collect::<Result<Vec<f64>>>()?;
+            if let Some(cols) = &difference_cols {
+                let sign = f64::from(self.position.difference_sign);
+                for (p, &c) in p.iter_mut().zip(cols) {
+                    *p += sign * table.number(r, c)? * length;
+                }
+            }
             measured.push(vec![Point3::new(p[0], p[1], p[2])]);
             if let (Some(out), Some((convention, scale, cols))) = (&mut rotations, &orientation) {
                 let is_quaternion = cols.len() == 4;
@@ -588,6 +631,69 @@ impl ColumnMapping {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A target plus a signed deviation reads as the measured point itself.
+    #[test]
+    fn target_plus_signed_difference_is_the_measured_point() {
+        let chain = crate::robot::description::from_toml(
+            "name = \"two\"\nconvention = \"dh\"\n[[joints]]\nname = \"a\"\na = 0.5\nalpha = 0.0\nd = 0.0\n\
+             lower = -3.0\nupper = 3.0\n[[joints]]\nname = \"b\"\na = 0.4\nalpha = 0.0\nd = 0.0\n\
+             lower = -3.0\nupper = 3.0\n",
+            "two",
+        )
+        .unwrap();
+        let plain = "a,b,mx,my,mz\n0.1,0.2,1000.5,-20.25,3.0\n-0.3,0.4,5.0,6.0,7.0\n";
+        let (tx, ty, tz) = ([1000.0, 5.5], [-20.0, 6.0], [2.0, 7.25]);
+        let mut with_diff = String::from("a,b,tx,ty,tz,dx,dy,dz\n");
+        let measured = [[1000.5, -20.25, 3.0], [5.0, 6.0, 7.0]];
+        let q = [[0.1, 0.2], [-0.3, 0.4]];
+        for r in 0..2 {
+            let t = [tx[r], ty[r], tz[r]];
+            // target − measured, so measured = target − difference
+            let d: Vec<f64> = (0..3).map(|k| t[k] - measured[r][k]).collect();
+            with_diff += &format!(
+                "{},{},{},{},{},{},{},{}\n",
+                q[r][0], q[r][1], t[0], t[1], t[2], d[0], d[1], d[2]
+            );
+        }
+        let read = |mapping: &str, text: &str| {
+            ColumnMapping::from_toml(mapping, "m")
+                .unwrap()
+                .from_reader(text.as_bytes(), "f", &chain)
+                .unwrap()
+        };
+        let a = read(
+            "[position]\nunit = \"mm\"\ncolumns = [\"mx\", \"my\", \"mz\"]\n",
+            plain,
+        );
+        let b = read(
+            "[position]\nunit = \"mm\"\ncolumns = [\"tx\", \"ty\", \"tz\"]\n\
+             difference = [\"dx\", \"dy\", \"dz\"]\ndifference_sign = -1\n",
+            &with_diff,
+        );
+        for (p, r) in a.measured.iter().zip(&b.measured) {
+            assert!((p[0] - r[0]).norm() < 1e-12, "{} against {}", p[0], r[0]);
+        }
+        assert_eq!(a.q, b.q);
+        let wrong_sign = read(
+            "[position]\nunit = \"mm\"\ncolumns = [\"tx\", \"ty\", \"tz\"]\n\
+             difference = [\"dx\", \"dy\", \"dz\"]\n",
+            &with_diff,
+        );
+        assert!((wrong_sign.measured[0][0] - a.measured[0][0]).norm() > 1e-4);
+        for (bad, needle) in [
+            ("difference_sign = 2", "difference_sign = 2"),
+            ("difference = [\"dx\", \"dy\"]", "difference: x, y, z"),
+        ] {
+            let e = ColumnMapping::from_toml(
+                &format!("[position]\ncolumns = [\"tx\", \"ty\", \"tz\"]\n{bad}\n"),
+                "m.toml",
+            )
+            .unwrap_err()
+            .line();
+            assert!(e.contains("m.toml") && e.contains(needle), "{e}");
+        }
+    }
 
     #[test]
     fn conventions() {
