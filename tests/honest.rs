@@ -173,3 +173,45 @@ fn a_calibration_worse_than_nominal_is_flagged() {
         "{stderr}"
     );
 }
+
+/// `--test-registration refit` on a small test campaign reports the model's own registration beside the refit,
+/// and warns that 9 parameters fitted on 20 points flatter the result; the refit, a least-squares fit over a
+/// set that contains the model's registration, is never worse in RMS on those points.
+#[test]
+fn a_refit_on_few_test_points_is_reported_beside_the_model_registration_and_warned() {
+    let dir = TempDir::new().unwrap();
+    let (data, _) = campaign(dir.path(), 240);
+    let (test, _) = campaign_of(&dir.path().join("test"), 20, 2019);
+    let mut o = options(&data, MethodKind::Kinematic, dir.path().join("fit"));
+    o.test_data = Some(test.clone());
+    let outcome = fit(&o).unwrap();
+    let r = &outcome.report;
+    let kept = r
+        .test_model_registration
+        .as_ref()
+        .expect("the model's registration is reported beside the refit");
+    assert!(
+        r.test.after.rms_mm <= kept.after.rms_mm + 1e-9,
+        "refit {} mm RMS, model's registration {} mm",
+        r.test.after.rms_mm,
+        kept.after.rms_mm
+    );
+    let warning = r
+        .warnings
+        .iter()
+        .find(|w| w.contains("parameters on 20 test points"))
+        .unwrap_or_else(|| panic!("no small-test-set warning in {:?}", r.warnings));
+    assert!(warning.contains("flatters"), "{warning}");
+    assert!(outcome.tables.contains("model's own registration"));
+    // With the model's registration there is nothing to warn about.
+    o.test_registration = TestRegistration::Model;
+    o.out = dir.path().join("fit-model");
+    let model = fit(&o).unwrap().report;
+    assert!(model.test_model_registration.is_none());
+    assert!(
+        !model
+            .warnings
+            .iter()
+            .any(|w| w.contains("test points (fewer than"))
+    );
+}

@@ -118,6 +118,21 @@ pub fn predicted_flanges(model: &dyn Fitted, data: &Dataset) -> Result<Vec<Isome
 
 impl Transfer {
     /// What was fitted on the test data, for reports.
+    /// Parameters fitted on the test data's own points (0 with the model's registration).
+    pub fn refitted_parameters(&self) -> usize {
+        match self.mode {
+            TestRegistration::Model => 0,
+            TestRegistration::Refit => {
+                6 + self.mounting_directions
+                    + if self.registration.probe_rotation.is_some() {
+                        3
+                    } else {
+                        0
+                    }
+            }
+        }
+    }
+
     pub fn describe(&self) -> String {
         match self.mode {
             TestRegistration::Model => "none: the model's registration".into(),
@@ -132,10 +147,11 @@ impl Transfer {
                     Some(_) => (", rotation 3", 3),
                     None => ("", 0),
                 };
+                let _ = extra;
                 format!(
                     "tracker frame (rigid, 6) and probe mounting ({mounting}{rotation}) re-registered on \
                      the test data's own points: {} parameters",
-                    6 + self.mounting_directions + extra
+                    self.refitted_parameters()
                 )
             }
         }
