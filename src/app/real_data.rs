@@ -259,25 +259,50 @@ fn rows_md(table: &Table) -> String {
         out += "---|---|";
     }
     out += "---|\n";
+    // A calibration that makes the arm worse than no calibration (issue 13) is marked where it appears.
+    let nominal = rows
+        .iter()
+        .find(|r| r.method == MethodKind::Nominal.name() && r.inputs.is_empty());
+    let mut marked = false;
     for r in rows {
         let _ = write!(out, "| {} |", name(r));
-        for s in &r.scores {
+        for (k, s) in r.scores.iter().enumerate() {
             let p = &s.position_mm;
+            let reference = nominal.map(|n| &n.scores[k]);
+            let worse = reference.is_some_and(|n| p.mean > n.position_mm.mean);
             let _ = write!(
                 out,
-                " {:.4} / {:.3} / {:.3} / {:.3} |",
-                p.mean, p.max, p.std, p.p95
+                " {:.4}{} / {:.3} / {:.3} / {:.3} |",
+                p.mean,
+                if worse { " †" } else { "" },
+                p.max,
+                p.std,
+                p.p95
             );
             match &s.orientation_mrad {
                 Some(o) => {
-                    let _ = write!(out, " {:.3} / {:.3} |", o.mean, o.p95);
+                    let worse = reference
+                        .and_then(|n| n.orientation_mrad.as_ref())
+                        .is_some_and(|n| o.mean > n.mean);
+                    let _ = write!(
+                        out,
+                        " {:.3}{} / {:.3} |",
+                        o.mean,
+                        if worse { " †" } else { "" },
+                        o.p95
+                    );
+                    marked |= worse;
                 }
                 None => out += " — |",
             }
+            marked |= worse;
         }
         let _ = writeln!(out, " {:.0} |", r.fit_ms);
     }
     out += "\n";
+    if marked {
+        out += "† worse than `nominal` on that test: the calibration makes the arm less accurate there.\n\n";
+    }
     for s in &rows[0].scores {
         let _ = writeln!(
             out,
