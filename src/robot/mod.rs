@@ -8,6 +8,7 @@ pub mod description;
 pub mod dh;
 pub mod dynamics;
 pub mod ik;
+pub mod inverse_dynamics;
 pub mod kinematics;
 pub mod plausible;
 pub mod urdf;
