@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::campaign::Campaign;
-use crate::dataset::{Dataset, FLANGE_COLUMNS, TEMPERATURE_COLUMN};
+use crate::dataset::{Dataset, FLANGE_COLUMNS, TEMPERATURE_COLUMN, TIME_COLUMN};
 use crate::error::{Error, Result};
 
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
@@ -62,6 +62,10 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     if temperature {
         header.push(TEMPERATURE_COLUMN.into());
     }
+    let time = campaign.points.iter().any(|p| p.time.is_some());
+    if time {
+        header.push(TIME_COLUMN.into());
+    }
     let rows = campaign.points.iter().map(move |p| {
         let mut row = vec![p.id.to_string(), p.region.clone()];
         row.extend(p.q_cmd.iter().map(|q| q.to_string()));
@@ -70,6 +74,9 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
         row.extend(point_cells(&p.measured));
         if temperature {
             row.push(p.temperature.map_or(String::new(), |t| t.to_string()));
+        }
+        if time {
+            row.push(p.time.map_or(String::new(), |t| t.to_string()));
         }
         row
     });

@@ -28,6 +28,7 @@ mod shards;
 mod study;
 mod study_cli;
 mod tracker;
+mod trajectory;
 mod truth;
 mod truth_effects;
 mod ur10;

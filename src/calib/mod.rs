@@ -31,6 +31,7 @@
 //! Everything else asks the descriptor (`MethodKind::info()`): the selection's check that a method has robot
 //! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base
 //! (`report::summary`), the model a campaign is designed for (`design::model`).
+pub mod clock;
 pub mod domain;
 pub mod error_model;
 pub mod kinematic;

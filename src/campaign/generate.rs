@@ -70,6 +70,8 @@ pub struct CampaignPoint {
     pub q_true: Vec<f64>,
     /// Temperature of the links when the point was measured (°C), when the true robot has a thermal profile.
     pub temperature: Option<f64>,
+    /// The tracker's time stamp of a sample measured on the fly (s; [`super::trajectory`]); `None` stop and go.
+    pub time: Option<f64>,
 }
 
 /// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a

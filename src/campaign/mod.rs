@@ -7,6 +7,7 @@ pub mod generate;
 pub mod region;
 mod selected;
 pub mod sequence;
+pub mod trajectory;
 
 pub use distribution::{DistributionKind, PointDistribution};
 pub use generate::{Campaign, CampaignPoint, Generator, Rejections, Selector};

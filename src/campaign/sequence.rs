@@ -115,6 +115,7 @@ impl Generator<'_> {
                         true_reflectors,
                         q_true: work.state.q.clone(),
                         temperature: history.temperature,
+                        time: None,
                     }
                 },
             )

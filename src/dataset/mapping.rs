@@ -624,6 +624,7 @@ impl ColumnMapping {
                 names: self.inputs.keys().cloned().collect(),
                 values: inputs,
             }),
+            time: None,
         })
     }
 }

@@ -42,6 +42,9 @@ pub const FLANGE_COLUMNS: [&str; 7] = [
 /// The temperature column (°C) of a measurements file: read as the extra input `temperature`.
 pub const TEMPERATURE_COLUMN: &str = "temperature";
 
+/// The time column (s, the tracker's clock) of a campaign measured on the fly.
+pub const TIME_COLUMN: &str = "time";
+
 /// The points of a measurement campaign, as a calibration method may see them.
 #[derive(Clone, Debug)]
 pub struct Dataset {
@@ -66,6 +69,8 @@ pub struct Dataset {
     pub measured_orientation: Option<Vec<UnitQuaternion<f64>>>,
     /// Inputs beyond the joint angles (e.g. the temperature) that a method may regress on.
     pub extra_inputs: Option<ExtraInputs>,
+    /// The tracker's time stamp of each sample (s), for a campaign measured on the fly (`time` column).
+    pub time: Option<Vec<f64>>,
 }
 
 /// Per-point values of named inputs beyond the joint angles.
@@ -116,6 +121,7 @@ impl Dataset {
         let split_col = table.column("split");
         let region_col = table.column("region");
         let temperature_col = table.column(TEMPERATURE_COLUMN);
+        let time_col = table.column(TIME_COLUMN);
 
         let n = table.rows.len();
         let point_ids = table.point_ids()?;
@@ -126,7 +132,11 @@ impl Dataset {
         let mut split = split_col.map(|_| Vec::with_capacity(n));
         let mut regions = region_col.map(|_| Vec::with_capacity(n));
         let mut temperature = temperature_col.map(|_| Vec::with_capacity(n));
+        let mut time = time_col.map(|_| Vec::with_capacity(n));
         for r in 0..n {
+            if let (Some(out), Some(c)) = (&mut time, time_col) {
+                out.push(table.number(r, c)?);
+            }
             if let (Some(out), Some(c)) = (&mut temperature, temperature_col) {
                 out.push(vec![table.number(r, c)?]);
             }
@@ -160,6 +170,7 @@ impl Dataset {
                 names: vec![TEMPERATURE_COLUMN.to_string()],
                 values,
             }),
+            time,
         })
     }
 
@@ -183,6 +194,7 @@ impl Dataset {
             regions: None,
             measured_orientation: None,
             extra_inputs: None,
+            time: None,
         }
     }
 
@@ -222,6 +234,7 @@ impl Dataset {
                 names: x.names.clone(),
                 values: pick(&x.values, indices),
             }),
+            time: self.time.as_deref().map(|v| pick(v, indices)),
         }
     }
 

@@ -27,6 +27,9 @@ pub struct Joint {
     pub upper: f64,
     /// Effort limit (Nm or N) as written in the URDF; informative only.
     pub effort: f64,
+    /// Velocity limit (rad/s or m/s) as written in the URDF; infinite when not given. Trajectories are timed
+    /// against it.
+    pub velocity: f64,
 }
 
 impl Joint {

@@ -309,6 +309,10 @@ impl Description {
                 lower: r.lower * unit,
                 upper: r.upper * unit,
                 effort: r.effort.unwrap_or(0.0),
+                velocity: r
+                    .velocity
+                    .filter(|v| *v > 0.0)
+                    .map_or(f64::INFINITY, |v| v * unit),
             });
             let inertial = match r.mass {
                 Some(mass) => {

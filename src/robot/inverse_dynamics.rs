@@ -52,6 +52,7 @@ fn point_accel(
 /// Joint torques (Nm; N for a prismatic joint) that move the chain, in the configuration of `frames` (a
 /// forward-kinematics pass at `q`), with joint velocities `qd` and accelerations `qdd`, carrying `payload` at
 /// the flange, under `gravity` (world frame). Fills `out`.
+#[allow(clippy::too_many_arguments)]
 pub fn inverse_dynamics(
     chain: &Chain,
     frames: &Frames,

@@ -250,6 +250,11 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
                     lower,
                     upper,
                     effort: j.limit.effort,
+                    velocity: if j.limit.velocity > 0.0 && j.limit.velocity.is_finite() {
+                        j.limit.velocity
+                    } else {
+                        f64::INFINITY
+                    },
                 });
                 bodies.push(Body {
                     links: Vec::new(),
@@ -471,7 +476,11 @@ pub fn to_urdf_string(chain: &Chain, payload: &super::chain::Payload) -> Result<
                     lower,
                     upper,
                     effort: j.effort,
-                    velocity: 1.0,
+                    velocity: if j.velocity.is_finite() {
+                        j.velocity
+                    } else {
+                        1.0
+                    },
                     ..Default::default()
                 },
             ));

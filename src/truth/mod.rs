@@ -1,5 +1,6 @@
 //! The true robot: what the real arm has and the controller does not know.
 pub mod history;
+pub mod motion;
 pub mod perturbation;
 pub mod physics;
 pub mod robot;
@@ -7,6 +8,7 @@ pub mod stiffness;
 pub mod thermal;
 
 pub use history::Visit;
+pub use motion::{MotionSample, PathPoint};
 pub use perturbation::{ErrorModel, Perturbation};
 pub use robot::{DeflectionSolver, TrueRobot, TrueState};
 pub use thermal::ThermalProfile;

@@ -19,6 +19,7 @@ use super::perturbation::Perturbation;
 use super::stiffness::tilt;
 use crate::error::{Error, Result};
 use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
+use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
 use crate::robot::kinematics::forward_kinematics;
 use crate::robot::{Chain, Frames, Inertial, Payload};
 
@@ -71,6 +72,7 @@ pub struct TrueState {
     pub scale: f64,
     tau: Vec<f64>,
     moments: Vec<Vector3<f64>>,
+    dynamics: Workspace,
 }
 
 impl TrueState {
@@ -84,6 +86,7 @@ impl TrueState {
             scale: 1.0,
             tau: vec![0.0; n],
             moments: vec![Vector3::zeros(); n],
+            dynamics: Workspace::new(&robot.chain),
         }
     }
 
@@ -251,6 +254,18 @@ impl TrueRobot {
     /// fixed point; on return `state.q` holds the deflected angles, `state.tilt` the tilts and `state.frames`
     /// their frames. Returns the iterations used.
     pub fn deflect(&self, state: &mut TrueState) -> Result<usize> {
+        self.deflect_moving(state, None)
+    }
+
+    /// [`TrueRobot::deflect`] of the arm in motion: with `motion = (q̇, q̈)` (rad/s, rad/s²) each joint carries
+    /// the full inverse-dynamics torque of the true links (inertial, Coriolis and centrifugal terms beside
+    /// gravity) instead of the gravity torque alone — quasi-static: the transmission's own vibration is not
+    /// modelled. Tilt still follows the gravity moment. With `None` it is the static solve, bit for bit.
+    pub fn deflect_moving(
+        &self,
+        state: &mut TrueState,
+        motion: Option<(&[f64], &[f64])>,
+    ) -> Result<usize> {
         state.q.copy_from_slice(&state.q0);
         let tilting = self.tilts();
         state.tilt.fill(Vector3::zeros());
@@ -265,7 +280,7 @@ impl TrueRobot {
                     &mut state.tau,
                     &mut state.moments,
                 );
-            } else {
+            } else if motion.is_none() {
                 gravity_torques(
                     &self.chain,
                     &state.frames,
@@ -273,6 +288,20 @@ impl TrueRobot {
                     &self.gravity,
                     &mut state.tau,
                 );
+            }
+            if let Some((qd, qdd)) = motion {
+                // What the load applies to the joint is minus what the joint must supply to move it.
+                inverse_dynamics(
+                    &self.chain,
+                    &state.frames,
+                    &self.payload,
+                    &self.gravity,
+                    qd,
+                    qdd,
+                    &mut state.dynamics,
+                    &mut state.tau,
+                );
+                state.tau.iter_mut().for_each(|t| *t = -*t);
             }
             let mut step: f64 = 0.0;
             for (i, ((q, q0), tau)) in state
@@ -373,7 +402,7 @@ impl TrueRobot {
         self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
     }
 
-    fn add_noise(&self, noise: Option<&mut ChaCha8Rng>, state: &mut TrueState) {
+    pub(crate) fn add_noise(&self, noise: Option<&mut ChaCha8Rng>, state: &mut TrueState) {
         let sigma = self.perturbation.repeatability_rad;
         if let (Some(rng), true) = (noise, sigma > 0.0) {
             let normal = Normal::new(0.0, sigma).expect("sigma validated positive and finite");

@@ -60,7 +60,11 @@ impl ThermalProfile {
 
     /// The temperature (°C) at the `k`-th point of a campaign's sequence (from 0).
     pub fn temperature(&self, k: usize) -> f64 {
-        let t = k as f64 * self.seconds_per_point;
+        self.temperature_at(k as f64 * self.seconds_per_point)
+    }
+
+    /// The temperature (°C) `t` seconds into the campaign (a trajectory's clock).
+    pub fn temperature_at(&self, t: f64) -> f64 {
         self.end_c + (self.start_c - self.end_c) * (-t / self.time_constant_s).exp()
     }
 

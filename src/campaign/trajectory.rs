@@ -1,0 +1,333 @@
+//! Measuring on the fly: a smooth joint-space path through the campaign's planned targets, timed under the
+//! robot's joint limits, executed by the true arm in motion ([`crate::truth::motion`]) and sampled by the tracker
+//! as it moves.
+//!
+//! The path is one quintic Hermite segment per pair of consecutive waypoints (the campaign's posture, then its
+//! targets in visiting order), with zero acceleration and a via velocity at every target: the arm passes through
+//! the targets without stopping, and position, velocity and acceleration are continuous. A via velocity is the
+//! mean of the two neighbouring segments' mean velocities, or zero for a joint that turns back there (no
+//! overshoot). Each segment's duration starts from the rest-to-rest quintic's peak velocity (15/8 of the mean)
+//! and acceleration (10/√3 Δ/T²) at `speed` × the limits and is stretched until the sampled peaks respect them.
+//!
+//! The tracker samples at `sample_rate_hz`; its samples are stamped by its own clock, the controller logs its
+//! joint readings by its own. A file pairs each tracker sample with the joint readings logged at the same stamp,
+//! so a clock offset δ between the two makes the pair disagree by the arm's motion over δ (1 ms at 1 m/s is 1 mm);
+//! timestamp jitter adds a random part of the same kind, which grows with speed as a tracker's dynamic error
+//! does. `measurements.csv` gains a `time` column (tracker clock, s); every `keep_every`-th sample is kept.
+
+use nalgebra::Point3;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use super::generate::{Campaign, CampaignPoint};
+use crate::error::{Error, Result};
+use crate::rng::{Stream, derive};
+use crate::robot::{Frames, forward_kinematics};
+use crate::truth::PathPoint;
+use crate::world::World;
+
+/// `[campaign.trajectory]`: measure on the fly instead of stop and go. Magnitudes and their sources in
+/// `scenarios/README.md`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TrajectoryConfig {
+    /// Fraction of every joint's velocity and acceleration limit the path may use, in (0, 1].
+    pub speed: f64,
+    /// Joint acceleration limit (rad/s², every joint).
+    pub acceleration_rad_s2: f64,
+    /// The tracker's sample rate (Hz).
+    pub sample_rate_hz: f64,
+    /// Keep every k-th sample in the campaign (1: all).
+    #[serde(default = "one")]
+    pub keep_every: usize,
+    /// The controller's clock minus the tracker's (s): the joint readings paired with a tracker sample are
+    /// those the controller logged `clock_offset_s` before the arm was where the tracker saw it.
+    #[serde(default)]
+    pub clock_offset_s: f64,
+    /// Standard deviation of each sample's timestamp (s).
+    #[serde(default)]
+    pub jitter_s: f64,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// The most samples a trajectory campaign keeps: the same bound as a region's point count.
+pub const MAX_SAMPLES: usize = 1_000_000;
+
+impl TrajectoryConfig {
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let positive = |v: f64, max: f64, what: &str| {
+            if v.is_finite() && v > 0.0 && v <= max {
+                Ok(())
+            } else {
+                Err(format!("trajectory.{what} = {v}: must be in (0, {max}]"))
+            }
+        };
+        positive(self.speed, 1.0, "speed")?;
+        positive(self.acceleration_rad_s2, 1e3, "acceleration_rad_s2")?;
+        positive(self.sample_rate_hz, 1e5, "sample_rate_hz")?;
+        if self.keep_every == 0 {
+            return Err("trajectory.keep_every = 0: must be at least 1".into());
+        }
+        for (what, v) in [
+            ("clock_offset_s", self.clock_offset_s),
+            ("jitter_s", self.jitter_s),
+        ] {
+            if !(v.is_finite() && v.abs() <= 1.0) || (what == "jitter_s" && v < 0.0) {
+                return Err(format!("trajectory.{what} = {v}: at most 1 s in magnitude"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One quintic segment from `q0` to `q1` with end velocities `v0`, `v1` and zero end accelerations.
+#[derive(Clone, Debug)]
+struct Segment {
+    start: f64,
+    duration: f64,
+    q0: Vec<f64>,
+    q1: Vec<f64>,
+    v0: Vec<f64>,
+    v1: Vec<f64>,
+}
+
+impl Segment {
+    /// Angle, velocity and acceleration of joint `j` at `s` ∈ [0, 1] of the segment.
+    fn eval(&self, j: usize, s: f64) -> (f64, f64, f64) {
+        let (s2, s3, s4, s5) = (s * s, s * s * s, s.powi(4), s.powi(5));
+        let t = self.duration;
+        let (p0, p1, v0, v1) = (self.q0[j], self.q1[j], self.v0[j], self.v1[j]);
+        let h0 = 1.0 - 10.0 * s3 + 15.0 * s4 - 6.0 * s5;
+        let h1 = s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5;
+        let h4 = -4.0 * s3 + 7.0 * s4 - 3.0 * s5;
+        let h5 = 10.0 * s3 - 15.0 * s4 + 6.0 * s5;
+        let d0 = -30.0 * s2 + 60.0 * s3 - 30.0 * s4;
+        let d1 = 1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4;
+        let d4 = -12.0 * s2 + 28.0 * s3 - 15.0 * s4;
+        let dd0 = -60.0 * s + 180.0 * s2 - 120.0 * s3;
+        let dd1 = -36.0 * s + 96.0 * s2 - 60.0 * s3;
+        let dd4 = -24.0 * s + 84.0 * s2 - 60.0 * s3;
+        (
+            p0 * h0 + p1 * h5 + t * (v0 * h1 + v1 * h4),
+            (p1 - p0) * (-d0) / t + v0 * d1 + v1 * d4,
+            (p1 - p0) * (-dd0) / (t * t) + (v0 * dd1 + v1 * dd4) / t,
+        )
+    }
+}
+
+/// A timed joint-space path through waypoints.
+#[derive(Clone, Debug)]
+pub struct Path {
+    segments: Vec<Segment>,
+}
+
+impl Path {
+    /// The path through `waypoints` (at least two) at `speed` × the velocity limits `vmax` (rad/s, per joint)
+    /// and the acceleration limit `amax` (rad/s²).
+    pub fn plan(waypoints: &[Vec<f64>], vmax: &[f64], amax: f64, speed: f64) -> Result<Path> {
+        if waypoints.len() < 2 {
+            return Err(Error::Invalid(
+                "a trajectory needs at least two waypoints".into(),
+            ));
+        }
+        let n = vmax.len();
+        let (vlim, alim): (Vec<f64>, f64) =
+            (vmax.iter().map(|v| v * speed).collect(), amax * speed);
+        let mut durations: Vec<f64> = waypoints
+            .windows(2)
+            .map(|w| {
+                (0..n)
+                    .map(|j| {
+                        let d = (w[1][j] - w[0][j]).abs();
+                        (1.875 * d / vlim[j]).max((5.7735 * d / alim).sqrt())
+                    })
+                    .fold(1e-3, f64::max)
+            })
+            .collect();
+        for _ in 0..30 {
+            let path = Path::with(waypoints, &durations);
+            let mut stretched = false;
+            for (k, seg) in path.segments.iter().enumerate() {
+                let mut ratio: f64 = 1.0;
+                for step in 0..=40 {
+                    let s = step as f64 / 40.0;
+                    for (j, vl) in vlim.iter().enumerate() {
+                        let (_, v, a) = seg.eval(j, s);
+                        ratio = ratio.max(v.abs() / vl).max((a.abs() / alim).sqrt());
+                    }
+                }
+                if ratio > 1.0 + 1e-9 {
+                    durations[k] *= ratio * 1.01;
+                    stretched = true;
+                }
+            }
+            if !stretched {
+                return Ok(path);
+            }
+        }
+        Ok(Path::with(waypoints, &durations))
+    }
+
+    fn with(waypoints: &[Vec<f64>], durations: &[f64]) -> Path {
+        let n = waypoints[0].len();
+        let m = waypoints.len();
+        let via = |k: usize| -> Vec<f64> {
+            if k == 0 || k == m - 1 {
+                return vec![0.0; n];
+            }
+            (0..n)
+                .map(|j| {
+                    let a = (waypoints[k][j] - waypoints[k - 1][j]) / durations[k - 1];
+                    let b = (waypoints[k + 1][j] - waypoints[k][j]) / durations[k];
+                    if a * b <= 0.0 { 0.0 } else { 0.5 * (a + b) }
+                })
+                .collect()
+        };
+        let mut start = 0.0;
+        let segments = (0..m - 1)
+            .map(|k| {
+                let s = Segment {
+                    start,
+                    duration: durations[k],
+                    q0: waypoints[k].clone(),
+                    q1: waypoints[k + 1].clone(),
+                    v0: via(k),
+                    v1: via(k + 1),
+                };
+                start += durations[k];
+                s
+            })
+            .collect();
+        Path { segments }
+    }
+
+    /// Total duration (s).
+    pub fn duration(&self) -> f64 {
+        self.segments.last().map_or(0.0, |s| s.start + s.duration)
+    }
+
+    /// The commanded sample at time `t` (clamped to the path).
+    pub fn at(&self, t: f64) -> PathPoint {
+        let t = t.clamp(0.0, self.duration());
+        let k = self
+            .segments
+            .partition_point(|s| s.start + s.duration < t)
+            .min(self.segments.len() - 1);
+        let seg = &self.segments[k];
+        let s = ((t - seg.start) / seg.duration).clamp(0.0, 1.0);
+        let n = seg.q0.len();
+        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for j in 0..n {
+            (q[j], qd[j], qdd[j]) = seg.eval(j, s);
+        }
+        PathPoint { t, q, qd, qdd }
+    }
+}
+
+/// A campaign measured on the fly, with what it cost and what the motion did.
+pub struct TrajectoryCampaign {
+    pub campaign: Campaign,
+    /// The path's duration: the tracker time the campaign takes (s).
+    pub duration_s: f64,
+    /// Per kept sample, the flange displacement due to the motion (m).
+    pub dynamic_m: Vec<f64>,
+}
+
+/// Measures `planned` (a stop-and-go campaign's targets, in its visiting order) on the fly in `world`: the path
+/// from `posture` through the targets, executed by the true arm, sampled by the tracker. Every draw comes from
+/// `seed`.
+pub fn measure(
+    world: &World,
+    planned: &Campaign,
+    posture: &[f64],
+    config: &TrajectoryConfig,
+    seed: u64,
+) -> Result<TrajectoryCampaign> {
+    config.validate().map_err(Error::Invalid)?;
+    let mut waypoints = vec![posture.to_vec()];
+    waypoints.extend(planned.points.iter().map(|p| p.q_cmd.clone()));
+    let vmax: Vec<f64> = world
+        .nominal
+        .joints
+        .iter()
+        .map(|j| {
+            if j.velocity.is_finite() {
+                j.velocity
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let path = Path::plan(&waypoints, &vmax, config.acceleration_rad_s2, config.speed)?;
+    let duration = path.duration();
+    let dt = 1.0 / config.sample_rate_hz;
+    let total = (duration / dt).floor() as usize + 1;
+    let kept: Vec<usize> = (0..total).step_by(config.keep_every).collect();
+    if kept.len() > MAX_SAMPLES {
+        return Err(Error::Invalid(format!(
+            "trajectory: {} samples kept over {duration:.1} s, above {MAX_SAMPLES}; raise keep_every",
+            kept.len()
+        )));
+    }
+    let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
+    let jitter = Normal::new(0.0, config.jitter_s.max(0.0))
+        .map_err(|e| Error::Invalid(format!("trajectory.jitter_s: {e}")))?;
+    // The tracker stamps sample k at k·dt by its clock; the arm was there at controller time k·dt + offset.
+    let stamps: Vec<f64> = kept.iter().map(|&k| k as f64 * dt).collect();
+    let truth_path: Vec<PathPoint> = stamps
+        .iter()
+        .map(|&s| path.at(s + config.clock_offset_s + jitter.sample(&mut rng)))
+        .collect();
+    let moved = world.robot.follow(&truth_path, Some(&mut rng))?;
+    let mut frames = Frames::new(&world.nominal);
+    let region = planned
+        .points
+        .first()
+        .map_or_else(String::new, |p| p.region.clone());
+    let mut points = Vec::with_capacity(kept.len());
+    for (k, (s, m)) in stamps.iter().zip(&moved).enumerate() {
+        let logged = path.at(*s).q;
+        forward_kinematics(&world.nominal, &logged, &mut frames);
+        let nominal_flange = frames.flange;
+        let true_reflectors: Vec<Point3<f64>> =
+            world.mounting.actual.iter().map(|p| m.flange * p).collect();
+        let measured = true_reflectors
+            .iter()
+            .map(|p| world.tracker.measure(p, &mut rng))
+            .collect();
+        points.push(CampaignPoint {
+            id: k,
+            region: region.clone(),
+            q_cmd: logged,
+            nominal_flange,
+            nominal_reflectors: world
+                .mounting
+                .nominal
+                .iter()
+                .map(|p| nominal_flange * p)
+                .collect(),
+            measured,
+            true_flange: m.flange,
+            true_in_tracker: true_reflectors
+                .iter()
+                .map(|p| world.tracker.pose.inverse_transform_point(p))
+                .collect(),
+            true_reflectors,
+            q_true: m.q.clone(),
+            temperature: None,
+            time: Some(*s),
+        });
+    }
+    Ok(TrajectoryCampaign {
+        campaign: Campaign {
+            joint_names: planned.joint_names.clone(),
+            points,
+            rejections: planned.rejections.clone(),
+        },
+        duration_s: duration,
+        dynamic_m: moved.iter().map(|m| m.dynamic_m).collect(),
+    })
+}

@@ -1,0 +1,177 @@
+//! Measuring on the fly (issue 16): the arm in motion against the arm at rest, a known clock offset recovered
+//! from a trajectory campaign, and the path's timing against the joint limits.
+
+use calibench::calib::clock;
+use calibench::campaign::trajectory::{self, Path, TrajectoryConfig};
+use calibench::measurements::as_dataset;
+use calibench::robot::dh::DhChain;
+use calibench::scenario::Scenario;
+use calibench::truth::{PathPoint, TrueState, Visit};
+
+/// paper_iiwa with `points` targets.
+fn scenario(points: usize) -> Scenario {
+    let text = std::fs::read_to_string("scenarios/paper_iiwa.toml").unwrap();
+    Scenario::parse(
+        &text.replacen("points = 2335", &format!("points = {points}"), 1),
+        "paper_iiwa (edited)",
+    )
+    .unwrap()
+}
+
+fn config(offset: f64) -> TrajectoryConfig {
+    TrajectoryConfig {
+        speed: 0.5,
+        acceleration_rad_s2: 5.0,
+        sample_rate_hz: 1000.0,
+        keep_every: 10,
+        clock_offset_s: offset,
+        jitter_s: 5e-6,
+    }
+}
+
+/// A path that stops at every target (zero velocity and acceleration there, each joint having just moved
+/// toward it): at the stops the arm in motion is the arm at rest, bit for bit, with the same lost motion and
+/// thermal state as the static campaign's sequence gives it.
+#[test]
+fn at_the_stops_the_moving_arm_is_the_static_arm() {
+    let s = scenario(30);
+    let sim = calibench::app::simulate(&s).unwrap();
+    let robot = &sim.world.robot;
+    let posture = s.campaign.posture_rad();
+    let commands: Vec<&[f64]> = sim
+        .campaign
+        .points
+        .iter()
+        .map(|p| p.q_cmd.as_slice())
+        .collect();
+    let visits =
+        calibench::truth::history::sequence(&robot.perturbation, &posture, commands.clone());
+    // The stops at the times the static sequence measures its points (so the warm-up is at the same stage).
+    let every = robot
+        .perturbation
+        .thermal
+        .as_ref()
+        .map_or(1.0, |t| t.seconds_per_point);
+    let mut path = Vec::new();
+    let mut previous = posture.clone();
+    for (k, q) in commands.iter().enumerate() {
+        // On the way, each joint moving toward the stop; then the stop itself, at rest.
+        let qd: Vec<f64> = q.iter().zip(&previous).map(|(a, b)| a - b).collect();
+        let mid: Vec<f64> = q
+            .iter()
+            .zip(&previous)
+            .map(|(a, b)| 0.5 * (a + b))
+            .collect();
+        let t = k as f64 * every;
+        path.push(PathPoint {
+            t: t - 0.5 * every,
+            q: mid,
+            qd,
+            qdd: vec![0.0; q.len()],
+        });
+        path.push(PathPoint {
+            t,
+            q: q.to_vec(),
+            qd: vec![0.0; q.len()],
+            qdd: vec![0.0; q.len()],
+        });
+        previous = q.to_vec();
+    }
+    let moved = robot.follow(&path, None).unwrap();
+    let mut state = TrueState::new(robot);
+    let mut moving = 0.0f64;
+    for (k, (q, visit)) in commands.iter().zip(&visits).enumerate() {
+        let visit = Visit {
+            direction: visit.direction.clone(),
+            temperature: visit.temperature,
+        };
+        robot.reach_after(q, &visit, None, &mut state).unwrap();
+        let stop = &moved[2 * k + 1];
+        assert_eq!(stop.dynamic_m, 0.0);
+        assert_eq!(stop.flange, state.frames.flange, "stop {k}");
+        moving = moving.max(moved[2 * k].dynamic_m);
+    }
+    // On the way the arm is loaded by its motion: the dynamic part is not zero.
+    assert!(moving > 0.0);
+}
+
+/// The planned path passes through every waypoint and keeps every joint within speed × its limits.
+#[test]
+fn the_path_respects_the_limits_and_passes_the_waypoints() {
+    let waypoints = vec![
+        vec![0.0, 0.0, 0.0],
+        vec![0.5, -0.3, 1.0],
+        vec![0.6, 0.2, 0.4],
+        vec![-0.2, 0.1, 0.4],
+    ];
+    let vmax = [1.0, 2.0, 1.5];
+    let path = Path::plan(&waypoints, &vmax, 4.0, 0.5).unwrap();
+    let t_end = path.duration();
+    let (mut peak_v, mut peak_a) = (0.0f64, 0.0f64);
+    let steps = 20_000;
+    for k in 0..=steps {
+        let p = path.at(t_end * k as f64 / steps as f64);
+        for (j, v) in vmax.iter().enumerate() {
+            peak_v = peak_v.max(p.qd[j].abs() / (0.5 * v));
+            peak_a = peak_a.max(p.qdd[j].abs() / (0.5 * 4.0));
+        }
+    }
+    assert!(
+        peak_v <= 1.0 + 1e-6 && peak_a <= 1.0 + 1e-3,
+        "{peak_v} {peak_a}"
+    );
+    assert!(peak_v > 0.5, "the path uses its speed: {peak_v}");
+    // Through the waypoints: the ends exactly, the vias somewhere along the way.
+    assert_eq!(path.at(0.0).q, waypoints[0]);
+    let end = path.at(t_end).q;
+    assert!(
+        end.iter()
+            .zip(&waypoints[3])
+            .all(|(a, b)| (a - b).abs() < 1e-12)
+    );
+    for w in &waypoints[1..3] {
+        let closest = (0..=steps)
+            .map(|k| {
+                let q = path.at(t_end * k as f64 / steps as f64).q;
+                q.iter()
+                    .zip(w)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(closest < 1e-3, "{closest}");
+    }
+}
+
+/// A 3 ms clock offset between tracker and controller is recovered from a trajectory campaign (issue 16:
+/// within 50 µs), and correcting for it brings the registration back to what the arm's errors leave.
+#[test]
+fn a_known_clock_offset_is_recovered() {
+    let s = scenario(60);
+    let sim = calibench::app::simulate(&s).unwrap();
+    let posture = s.campaign.posture_rad();
+    let measured =
+        trajectory::measure(&sim.world, &sim.campaign, &posture, &config(0.003), 7).unwrap();
+    let data = as_dataset(&measured.campaign, "trajectory").unwrap();
+    assert!(data.time.is_some());
+    let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
+    let found = clock::estimate(&dh, &data, 0.05).unwrap();
+    eprintln!(
+        "{} samples over {:.1} s: offset {:.2} µs (true 3000), registration RMS {:.4} mm at it, {:.4} mm at 0; \
+         dynamic deflection up to {:.4} mm",
+        data.len(),
+        measured.duration_s,
+        found.offset_s * 1e6,
+        found.rms_m * 1e3,
+        found.rms_at_zero_m * 1e3,
+        measured.dynamic_m.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3
+    );
+    assert!(
+        (found.offset_s - 0.003).abs() <= 50e-6,
+        "{} s",
+        found.offset_s
+    );
+    assert!(found.rms_m < 0.5 * found.rms_at_zero_m);
+    let corrected = clock::corrected(&data, found.offset_s).unwrap();
+    assert_eq!(corrected.len(), data.len());
+}
