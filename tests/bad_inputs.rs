@@ -488,7 +488,7 @@ fn cases(f: &Fixture) -> Vec<Case> {
         "real_data without its data",
         REAL_DATA,
         os(&[&"--data-dir", &missing, &"--no-curve", &"--out", &out]),
-        s(&[&p(&missing), "cannot read"]),
+        s(&[&p(&missing), "no such directory", "--data-dir"]),
         out,
     );
     cases

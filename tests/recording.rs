@@ -153,6 +153,7 @@ fn study(chain: &Chain) -> StudyResult {
         move_s: 3.0,
         settle_s: 2.0,
         measure_s: 1.0,
+        trajectory: None,
     };
     StudyResult {
         world: scenario.world_config(),
@@ -162,6 +163,7 @@ fn study(chain: &Chain) -> StudyResult {
         detail,
         orientation: false,
         limits: Vec::new(),
+        trajectory: Vec::new(),
     }
 }
 

@@ -69,6 +69,7 @@ pub fn study(orientation: bool) -> StudyResult {
         move_s: 3.0,
         settle_s: 2.0,
         measure_s: 1.0,
+        trajectory: None,
     };
     let mut runs = Vec::new();
     for region in &regions {
@@ -157,6 +158,7 @@ pub fn study(orientation: bool) -> StudyResult {
             tracker_noise_mean: 0.03e-3,
             repeatability_mean: 0.012e-3,
         }],
+        trajectory: Vec::new(),
     }
 }
 

@@ -32,6 +32,10 @@ pub fn small_study() -> String {
     text = edit(&text, "grid_points = 1000 ", "grid_points = 60 ");
     text = edit(&text, "shell_points = 200", "shell_points = 30");
     text = edit(&text, "closed_loop_points = 100", "closed_loop_points = 20");
+    // The trajectory comparison on one size, one seed, one speed.
+    text = edit(&text, "sizes = [30, 125]", "sizes = [20]");
+    text = edit(&text, "speeds = [0.25, 0.5, 1.0]", "speeds = [0.5]");
+    text = edit(&text, "seeds = 3\n", "seeds = 1\n");
     edit(&text, "points = 2335", "points = 200")
 }
 

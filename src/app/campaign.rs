@@ -25,6 +25,8 @@ const OUTPUTS: &[&str] = &[
     "evaluation.json",
     "metrics.csv",
     "outside.csv",
+    "answer.csv",
+    "trajectory.csv",
     "summary.md",
     "plots",
     "campaign.rrd",

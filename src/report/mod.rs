@@ -11,6 +11,7 @@ pub mod plots;
 pub mod recording;
 pub mod summary;
 pub mod tables;
+pub mod trajectory;
 
 use crate::error::Result;
 use crate::robot::Chain;
@@ -26,6 +27,9 @@ pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Ve
         ("outside.csv".to_string(), metrics::outside_csv(study)?),
         ("answer.csv".to_string(), answer::answer_csv(study)?),
     ];
+    if let Some(csv) = trajectory::trajectory_csv(study)? {
+        files.push(("trajectory.csv".to_string(), csv));
+    }
     files.extend(plots::learning_curves_png(study)?);
     files.extend(plots::histograms_png(study)?);
     files.push((

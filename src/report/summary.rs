@@ -450,6 +450,7 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
         );
     }
     compact_curves_md(&a, &curves, &mut out);
+    super::trajectory::trajectory_md(study, &mut out);
 
     let _ = writeln!(out, "## Verdict\n");
     for region in &a.regions {

@@ -82,6 +82,9 @@ pub struct StudyConfig {
     pub settle_s: f64,
     #[serde(default = "default_measure_s")]
     pub measure_s: f64,
+    /// Trajectory campaigns through the same targets, for the tracker-time comparison ([`super::trajectory`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<super::trajectory::TrajectoryStudy>,
 }
 
 impl StudyConfig {
@@ -135,6 +138,9 @@ impl StudyConfig {
         }
         if self.seeds == 0 {
             return Err("seeds = 0: at least one repetition is needed".into());
+        }
+        if let Some(t) = &self.trajectory {
+            t.validate(self)?;
         }
         let campaigns = (regions.len() as u128)
             * (self.distributions.len() as u128)

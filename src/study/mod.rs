@@ -21,6 +21,7 @@ mod measure;
 mod progress;
 pub mod shard;
 pub mod sweep;
+pub mod trajectory;
 
 pub use config::StudyConfig;
 pub use limits::Limits;
@@ -138,4 +139,6 @@ pub struct StudyResult {
     pub orientation: bool,
     /// Per region, what the tracker's noise and the arm's repeatability leave (empty when not computed).
     pub limits: Vec<Limits>,
+    /// The trajectory campaigns' runs (`[study.trajectory]`; empty without it).
+    pub trajectory: Vec<trajectory::TrajectoryRun>,
 }

@@ -67,6 +67,8 @@ pub struct StudyPart {
     pub runs: Vec<RunMetrics>,
     pub detail: Option<Detail>,
     pub limits: Vec<Limits>,
+    /// The trajectory runs, computed by shard 0 alone.
+    pub trajectory: Vec<super::trajectory::TrajectoryRun>,
 }
 
 /// The study of `parts` (one unsharded part, or every shard's): runs in the configuration's order (region,
@@ -103,9 +105,11 @@ pub fn assemble(
     let limits = parts.first().map(|p| p.limits.clone()).unwrap_or_default();
     let mut runs = Vec::new();
     let mut details = Vec::new();
+    let mut trajectory = Vec::new();
     for part in parts {
         runs.extend(part.runs);
         details.extend(part.detail);
+        trajectory.extend(part.trajectory);
     }
     runs.sort_by_key(|r| order(r));
     // The detail candidates are the campaigns of the first region, layout and seed: one per size, so the
@@ -136,6 +140,7 @@ pub fn assemble(
         detail,
         orientation: world.mounting.count() >= 3,
         limits,
+        trajectory,
     }
 }
 

@@ -244,6 +244,17 @@ pub fn run_part(
         }
     }
     keyed.sort_by_key(|(k, _)| *k);
+    let trajectory = match (&config.trajectory, shard.index) {
+        (Some(t), 0) => super::trajectory::run(
+            &shared.measure,
+            config,
+            t,
+            &shared.ctx,
+            &shared.kinds,
+            &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
+        )?,
+        _ => Vec::new(),
+    };
     Ok(StudyPart {
         shard,
         campaigns: held,
@@ -251,6 +262,7 @@ pub fn run_part(
         runs: keyed.into_iter().map(|(_, run)| run).collect(),
         detail: details.into_iter().max_by_key(|d| d.n_train),
         limits: shared.regions.iter().map(|r| r.limits.clone()).collect(),
+        trajectory,
     })
 }
 
