@@ -309,6 +309,7 @@ mod tests {
                 },
                 nest: None,
                 probe_rotation: None,
+                base_frame: false,
             },
             domain: Default::default(),
         };

@@ -32,7 +32,9 @@ use super::kinematic::{ELASTIC, KINEMATIC};
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
 use super::rigid::centre;
-use super::tracker_frame::{Observation, Registration, fit_tracker_frame, probe_rotation};
+use super::tracker_frame::{
+    Observation, Registration, fit_mounting, fit_tracker_frame, probe_rotation,
+};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
@@ -526,8 +528,11 @@ impl ResidualModel {
             if stalled >= STALLED_ROUNDS {
                 break;
             }
-            registration.frame =
-                fit_tracker_frame(&centres, &shifted, &registration.frame.mounting)?;
+            registration.frame = if registration.base_frame {
+                fit_mounting(&centres, &shifted)?
+            } else {
+                fit_tracker_frame(&centres, &shifted, &registration.frame.mounting)?
+            };
             if let (Some(_), Some(measured)) = (registration.probe_rotation, &orientations) {
                 registration.probe_rotation =
                     Some(probe_rotation(&registration.frame, &flanges, measured)?);

@@ -53,6 +53,9 @@ pub struct Registration {
     /// A 6-DoF probe's rotation in the flange frame, when the data measures the probe's orientation.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_rotation: Option<UnitQuaternion<f64>>,
+    /// The data was in the robot's base frame: the frame is the identity and stays so in every refit.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub base_frame: bool,
 }
 
 /// The weight (m/rad) of a 6-DoF probe's rotation residual against its position residual where a method fits
@@ -123,7 +126,12 @@ impl Registration {
             }
             _ => Point3::origin(),
         };
-        let frame = fit_tracker_frame(&centres, &flanges, &guess)?;
+        let base_frame = train.base_frame || val.base_frame;
+        let frame = if base_frame {
+            fit_mounting(&centres, &flanges)?
+        } else {
+            fit_tracker_frame(&centres, &flanges, &guess)?
+        };
         let probe_rotation = match (&train.measured_orientation, &val.measured_orientation) {
             (Some(a), Some(b)) => Some(probe_rotation(
                 &frame,
@@ -142,6 +150,7 @@ impl Registration {
             frame,
             nest: nest_geometry(dh, train)?,
             probe_rotation,
+            base_frame,
         })
     }
 
@@ -274,6 +283,43 @@ fn nest_geometry(dh: &DhChain, data: &Dataset) -> Result<Option<Vec<Point3<f64>>
     let local: Vec<Point3<f64>> = nominal[0].iter().map(|p| flange_inv * p).collect();
     let c = centre(&local);
     Ok(Some(local.iter().map(|p| Point3::from(p - c)).collect()))
+}
+
+/// The mounting alone, for measurements already in the base frame (the frame is the identity): the least-squares
+/// `m` of `y_i = F_i·m`, in closed form `m = mean(R_iᵀ (y_i − t_i))`.
+pub fn fit_mounting(measured: &[Point3<f64>], flanges: &[Isometry3<f64>]) -> Result<TrackerFrame> {
+    if measured.len() != flanges.len() || measured.is_empty() {
+        return Err(Error::Invalid(format!(
+            "mounting: {} measured points for {} flange poses",
+            measured.len(),
+            flanges.len()
+        )));
+    }
+    let n = measured.len() as f64;
+    let mounting = Point3::from(
+        measured
+            .iter()
+            .zip(flanges)
+            .map(|(y, f)| f.inverse_transform_point(y).coords)
+            .sum::<Vector3<f64>>()
+            / n,
+    );
+    let rms = (measured
+        .iter()
+        .zip(flanges)
+        .map(|(y, f)| (y - f * mounting).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    if !rms.is_finite() {
+        return Err(Error::Invalid("mounting: the points are not finite".into()));
+    }
+    Ok(TrackerFrame {
+        tracker_to_base: Isometry3::identity(),
+        mounting,
+        rms,
+        evaluations: 0,
+    })
 }
 
 /// Fits the tracker frame and the mounting. `mounting_guess`: the nominal mounting, or the flange origin when

@@ -16,6 +16,7 @@
 //! columns = ["measurement_x", "measurement_y", "measurement_z"]
 //! # difference = ["dev_x", "dev_y", "dev_z"]   # optional: measured = columns + difference_sign · difference
 //! # difference_sign = -1   # 1 (default: the difference is measured − columns) or -1 (columns − measured)
+//! # frame = "base"         # the coordinates are already in the robot's base frame: only the mounting is fitted
 //!
 //! [orientation]            # optional: a 6-DoF probe's orientation, tracker frame
 //! convention = "intrinsic-xyz"   # intrinsic-ABC | extrinsic-ABC (A, B, C each x, y or z) | quaternion-wxyz | quaternion-xyzw
@@ -114,6 +115,19 @@ pub struct PositionColumns {
     /// +1 (the difference is measured − target) or −1 (target − measured).
     #[serde(default = "plus_one")]
     pub difference_sign: i32,
+    /// The frame the coordinates are in: the tracker's (a tracker frame is fitted) or the robot's base frame
+    /// (an export already transformed by the tracker software; only the mounting is fitted).
+    #[serde(default)]
+    pub frame: PositionFrame,
+}
+
+/// The frame of the measured positions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PositionFrame {
+    #[default]
+    Tracker,
+    Base,
 }
 
 fn plus_one() -> i32 {
@@ -625,6 +639,7 @@ impl ColumnMapping {
                 values: inputs,
             }),
             time: None,
+            base_frame: self.position.frame == PositionFrame::Base,
         })
     }
 }

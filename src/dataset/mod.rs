@@ -71,6 +71,9 @@ pub struct Dataset {
     pub extra_inputs: Option<ExtraInputs>,
     /// The tracker's time stamp of each sample (s), for a campaign measured on the fly (`time` column).
     pub time: Option<Vec<f64>>,
+    /// The measurements are already in the robot's base frame (a mapping's `[position] frame = "base"`): no
+    /// tracker frame is fitted, only the mounting.
+    pub base_frame: bool,
 }
 
 /// Per-point values of named inputs beyond the joint angles.
@@ -171,6 +174,7 @@ impl Dataset {
                 values,
             }),
             time,
+            base_frame: false,
         })
     }
 
@@ -195,6 +199,7 @@ impl Dataset {
             measured_orientation: None,
             extra_inputs: None,
             time: None,
+            base_frame: false,
         }
     }
 
@@ -235,6 +240,7 @@ impl Dataset {
                 values: pick(&x.values, indices),
             }),
             time: self.time.as_deref().map(|v| pick(v, indices)),
+            base_frame: self.base_frame,
         }
     }
 

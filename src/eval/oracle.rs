@@ -55,6 +55,7 @@ impl Oracle {
                     },
                     nest,
                     probe_rotation: None,
+                    base_frame: false,
                 },
                 domain: Default::default(),
             },

@@ -26,7 +26,8 @@ use super::accuracy::PointErrors;
 use crate::calib::method::Fitted;
 use crate::calib::rigid::centre;
 use crate::calib::tracker_frame::{
-    Registration, fit_tracker_frame, fit_tracker_frame_along, probe_rotation, turning_directions,
+    Registration, fit_mounting, fit_tracker_frame, fit_tracker_frame_along, probe_rotation,
+    turning_directions,
 };
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -177,7 +178,9 @@ fn reregister_on(
     // whatever a model predicts about the orientation.
     let commanded: Vec<Isometry3<f64>> = data.q.iter().map(|q| model.dh().flange_pose(q)).collect();
     let directions = turning_directions(&commanded, MIN_TURN_RAD);
-    let frame = if directions.len() == 3 {
+    let frame = if data.base_frame {
+        fit_mounting(&centres, flanges)?
+    } else if directions.len() == 3 {
         fit_tracker_frame(&centres, flanges, &mounting)?
     } else {
         fit_tracker_frame_along(&centres, flanges, &mounting, &directions)?
@@ -196,6 +199,7 @@ fn reregister_on(
             frame,
             nest,
             probe_rotation,
+            base_frame: data.base_frame,
         },
         directions.len(),
     ))

@@ -219,7 +219,14 @@ impl KinematicModel {
                 .collect()
         };
         let base = State::initial(n, registration.frame.mounting);
-        let all = candidates(n, elastic);
+        // Data in the base frame has no tracker frame to fit: the base's own errors take its place.
+        let all: Vec<Param> = candidates(n, elastic)
+            .into_iter()
+            .filter(|p| {
+                !(registration.base_frame
+                    && matches!(p, Param::TrackerRotation(_) | Param::TrackerTranslation(_)))
+            })
+            .collect();
 
         // The structurally identifiable set, from configurations that do not depend on the data.
         let (lower, upper) = ctx.limits();
@@ -332,6 +339,7 @@ impl KinematicModel {
                     },
                     nest: registration.nest,
                     probe_rotation: registration.probe_rotation,
+                    base_frame: registration.base_frame,
                 },
                 domain: Domain::of(train, val),
             },
