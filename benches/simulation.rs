@@ -152,7 +152,12 @@ fn main() {
         iterations as f64 / commands.len() as f64
     );
 
-    // The physics reference.
+    // The physics reference, which has no bearing tilt: on the iiwa of ideal_elastic.toml (joint compliance,
+    // geometric errors), with the fast path timed on the same robot.
+    let ideal = Scenario::load("scenarios/ideal_elastic.toml").expect("run from the crate root");
+    let ideal_world = calibench::app::world(&ideal).expect("the ideal scenario builds a world");
+    let robot = &ideal_world.robot;
+    let mut state = TrueState::new(robot);
     let mut physics = robot
         .physics_reference(SettleOptions::default())
         .expect("rapier world");
@@ -169,6 +174,59 @@ fn main() {
         per_settle * 1e3,
         steps as f64 / sample.len() as f64
     );
+
+    // The arm in motion (issue 16): the fast quasi-static path against rapier integrating the dynamics, on the
+    // same 100 Hz samples of a path at half the limits (rapier stepped at 0.2 ms, as tests/motion.rs).
+    {
+        use calibench::campaign::trajectory::Path;
+        let start = ideal.campaign.posture_rad();
+        let via: Vec<f64> = start
+            .iter()
+            .enumerate()
+            .map(|(j, q)| q + 0.35 * if j % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let end: Vec<f64> = start.iter().map(|q| q + 0.1).collect();
+        let vmax: Vec<f64> = nominal.joints.iter().map(|j| j.velocity).collect();
+        let path = Path::plan(&[start, via, end], &vmax, 5.0, 0.5).expect("a path");
+        let times: Vec<f64> = (0..)
+            .map(|k| k as f64 * 0.01)
+            .take_while(|t| *t <= path.duration())
+            .collect();
+        let points: Vec<_> = times.iter().map(|&t| path.at(t)).collect();
+        let fast: Vec<Duration> = (0..20)
+            .map(|_| {
+                let t = Instant::now();
+                let m = robot.follow(&points, None).expect("follows");
+                sink.x += m[0].dynamic_m;
+                t.elapsed()
+            })
+            .collect();
+        let n = nominal.dof();
+        let rest_at = |t: f64| {
+            let mut q0 = vec![0.0; n];
+            robot.unloaded_angles(&path.at(t).q, &mut q0);
+            q0
+        };
+        let reference: Vec<Duration> = (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                let q = physics
+                    .follow(&rest_at, &times, 2e-4)
+                    .expect("rapier follows");
+                sink.x += q[0][0];
+                t.elapsed()
+            })
+            .collect();
+        let (f, r) = (median(fast).as_secs_f64(), median(reference).as_secs_f64());
+        println!(
+            "arm in motion, {} samples over {:.2} s: fast path {:.3} ms, rapier {:.1} ms ({:.0}× faster)",
+            times.len(),
+            path.duration(),
+            f * 1e3,
+            r * 1e3,
+            r / f
+        );
+    }
 
     // The paper campaign, as the binary generates it (without writing files).
     let setup = Generator {

@@ -16,6 +16,7 @@ mod honest;
 mod identify;
 mod kinematic;
 mod magnitudes;
+mod motion;
 mod real_data;
 mod recording;
 mod replay;

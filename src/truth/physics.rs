@@ -31,7 +31,7 @@ use crate::error::{Error, Result};
 
 /// Index of the URDF joint axis in rapier's 6-DoF joint layout (`AngX`): the loader aligns the
 /// joint frame's X axis with the URDF `<axis>`.
-const ANG_X: usize = 3;
+pub(super) const ANG_X: usize = 3;
 
 /// How the reference world is stepped to equilibrium.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,16 +77,16 @@ pub struct Settled {
 
 /// One caller joint: its name and the multibody joint that moves it.
 #[derive(Debug, Clone)]
-struct JointSlot {
-    name: String,
-    handle: MultibodyJointHandle,
-    stiffness: f64,
+pub(super) struct JointSlot {
+    pub(super) name: String,
+    pub(super) handle: MultibodyJointHandle,
+    pub(super) stiffness: f64,
 }
 
 /// A rapier world holding the compliant arm.
 pub struct PhysicsReference {
-    world: PhysicsWorld,
-    joints: Vec<JointSlot>,
+    pub(super) world: PhysicsWorld,
+    pub(super) joints: Vec<JointSlot>,
     opts: SettleOptions,
     /// Load-dependent stiffness per joint (empty: the linear springs of `joints`).
     soft_zones: Vec<SoftZone>,
@@ -372,7 +372,7 @@ impl PhysicsReference {
     }
 
     /// Offsets of the caller's joints in the multibody's generalized coordinates.
-    fn dof_indices(&self) -> Result<Vec<(usize, usize)>> {
+    pub(super) fn dof_indices(&self) -> Result<Vec<(usize, usize)>> {
         self.joints
             .iter()
             .map(|j| {
@@ -389,7 +389,7 @@ impl PhysicsReference {
             .collect()
     }
 
-    fn read_q(&self, links: &[(usize, usize)], out: &mut [f64]) -> Result<()> {
+    pub(super) fn read_q(&self, links: &[(usize, usize)], out: &mut [f64]) -> Result<()> {
         let (mb, _) = self
             .world
             .multibody_joints

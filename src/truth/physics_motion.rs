@@ -1,0 +1,84 @@
+//! The rapier reference of the arm in motion: the compliant multibody of [`super::physics`] driven along a path
+//! by moving its springs' rest angles (the motor side), stepped at a small time step, so that the link side
+//! follows with its full dynamics — inertia, Coriolis and centrifugal loads, and the springs' own ringing, which
+//! the fast path ([`super::motion`], quasi-static) leaves out. What the two disagree by is what the fast path
+//! misses.
+//!
+//! Rapier integrates the springs implicitly (backward Euler): stable at any step, with a numerical damping of
+//! the joints' vibration of about ω·dt/2 per radian of phase (ω = √(k/J) is tens of rad/s for the iiwa), which
+//! stands in for the transmissions' own damping here: rapier's per-joint damping acts on the absolute joint
+//! velocity, not on the velocity across the transmission, and would drag the arm along any path.
+
+use rapier3d::prelude::Real;
+
+use super::physics::{ANG_X, PhysicsReference};
+use crate::error::{Error, Result};
+
+impl PhysicsReference {
+    /// The joint angles (rad) at each of `times` (ascending, s) of the arm whose springs' rest angles follow
+    /// `rest_at(t)`, starting at rest in the equilibrium of `rest_at(times[0])`, stepped at `dt` (s).
+    pub fn follow(
+        &mut self,
+        rest_at: &dyn Fn(f64) -> Vec<f64>,
+        times: &[f64],
+        dt: f64,
+    ) -> Result<Vec<Vec<f64>>> {
+        let Some(&t0) = times.first() else {
+            return Ok(Vec::new());
+        };
+        if !(dt.is_finite() && dt > 0.0)
+            || times
+                .windows(2)
+                .any(|w| w[1].partial_cmp(&w[0]).is_none_or(|o| o.is_lt()))
+        {
+            return Err(Error::Invalid(format!(
+                "physics reference: time step {dt} s must be positive and the times ascending"
+            )));
+        }
+        self.settle(&rest_at(t0))?;
+        let links = self.dof_indices()?;
+        let saved = self.world.integration_parameters.dt;
+        self.world.integration_parameters.dt = dt as Real;
+        {
+            let (mb, _) = self
+                .world
+                .multibody_joints
+                .get_mut(self.joints[0].handle)
+                .ok_or_else(|| Error::Physics("multibody lost".into()))?;
+            mb.damping_mut().fill(0.0);
+        }
+        let n = self.joints.len();
+        let mut out = Vec::with_capacity(times.len());
+        let mut t = t0;
+        let mut q = vec![0.0; n];
+        for &target in times {
+            while t + 0.5 * dt < target {
+                // The implicit spring acts with the rest angle at the end of the step.
+                let rest = rest_at(t + dt);
+                let (mb, _) = self
+                    .world
+                    .multibody_joints
+                    .get_mut(self.joints[0].handle)
+                    .ok_or_else(|| Error::Physics("multibody lost".into()))?;
+                for ((slot, &(link_id, _)), r) in self.joints.iter().zip(&links).zip(&rest) {
+                    let link = mb
+                        .link_mut(link_id)
+                        .ok_or_else(|| Error::Physics("multibody link lost".into()))?;
+                    link.joint
+                        .set_spring(ANG_X, slot.stiffness as Real, *r as Real);
+                }
+                self.world.step();
+                t += dt;
+            }
+            self.read_q(&links, &mut q)?;
+            if q.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Physics(format!(
+                    "joint angles became non-finite at t = {t} s (dt {dt} s too large?)"
+                )));
+            }
+            out.push(q.clone());
+        }
+        self.world.integration_parameters.dt = saved;
+        Ok(out)
+    }
+}
