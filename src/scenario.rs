@@ -131,6 +131,14 @@ impl Scenario {
             .validate()
             .and_then(|()| selection_model(&self.campaign.selection.model))
             .map_err(|m| format!("campaign: {m}"))?;
+        if self.campaign.trajectory.is_some() && (self.evaluation.is_some() || self.study.is_some())
+        {
+            return Err(
+                "campaign.trajectory measures the campaign on the fly, while [evaluation] and [study] judge \
+                 campaigns measured at rest; drop one (a study compares the two with [study.trajectory])"
+                    .into(),
+            );
+        }
         if let Some(evaluation) = &self.evaluation {
             evaluation
                 .validate()

@@ -914,3 +914,51 @@ fn apply_refuses_a_model_that_does_not_fit_itself() {
         assert!(!out.exists(), "{name}: {line}");
     }
 }
+
+/// Issue 16: a campaign measured on the fly end to end. `[campaign.trajectory]` makes the `campaign` binary
+/// sample one path through the planned targets, with a 3 ms clock offset; `measurements.csv` gains a `time`
+/// column, and `calibrate` finds the offset (within 50 µs) and removes it before fitting. The same section
+/// beside an `[evaluation]` (which judges campaigns measured at rest) is refused on one line.
+#[test]
+fn a_campaign_measured_on_the_fly_is_synchronised_by_calibrate() {
+    let dir = TempDir::new().unwrap();
+    let text = small_paper(40);
+    let at_rest = &text[..text
+        .find("[evaluation]")
+        .expect("paper_iiwa has an [evaluation]")];
+    let trajectory = "\n[campaign.trajectory]\nspeed = 0.5\nacceleration_rad_s2 = 5.0\n\
+                      sample_rate_hz = 1000.0\nkeep_every = 10\nclock_offset_s = 0.003\njitter_s = 5e-6\n";
+    let out = campaign(&dir, "on_the_fly", &format!("{at_rest}{trajectory}"));
+    let measurements = out.join("measurements.csv");
+    let csv = Csv::read(&measurements);
+    assert!(csv.header.iter().any(|h| h == "time"), "{:?}", csv.header);
+    let report = json(&out.join("campaign.json"));
+    assert_eq!(report["trajectory"]["targets"], 40);
+    assert_eq!(
+        report["trajectory"]["samples"].as_u64(),
+        Some(csv.rows.len() as u64)
+    );
+    assert!(csv.rows.len() > 100, "{} samples", csv.rows.len());
+
+    let fitted = dir.path().join("fit");
+    let stdout = fit_ok(&measurements, &fitted, &["--method", "kinematic"]);
+    assert!(stdout.contains("clock offset"), "{stdout}");
+    let offset = json(&fitted.join("report.json"))["clock_offset"]["offset_s"]
+        .as_f64()
+        .expect("report.json has clock_offset.offset_s");
+    eprintln!(
+        "{} samples: clock offset {:.1} µs (true 3000)",
+        csv.rows.len(),
+        offset * 1e6
+    );
+    assert!((offset - 0.003).abs() <= 50e-6, "{offset} s");
+
+    let refused = dir.path().join("refused.toml");
+    std::fs::write(&refused, format!("{text}{trajectory}")).unwrap();
+    let bad_out = dir.path().join("refused_out");
+    let output = run_bin(
+        env!("CARGO_BIN_EXE_campaign"),
+        &[refused.as_os_str(), "--out".as_ref(), bad_out.as_os_str()],
+    );
+    assert_clean_failure(&output, &bad_out, &["campaign.trajectory", "[evaluation]"]);
+}

@@ -9,6 +9,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
+use crate::calib::clock::{self, ClockOffset};
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind, Save, SavedModel};
 use crate::calib::regression::RegressionOptions;
@@ -95,7 +96,22 @@ pub struct CalibrationReport {
     pub warnings: Vec<String>,
     /// Test points outside the model's training domain (`test_points.csv`).
     pub test_outside_domain: usize,
+    /// For data measured on the fly (a `time` column): the clock offset removed before fitting (controller minus
+    /// tracker, s) and the nominal registration's RMS at it and at zero (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clock_offset: Option<ClockReport>,
 }
+
+/// The clock offset `calibrate` removed.
+#[derive(Clone, Debug, Serialize)]
+pub struct ClockReport {
+    pub offset_s: f64,
+    pub rms_mm: f64,
+    pub rms_at_zero_mm: f64,
+}
+
+/// The clock offset is searched within ±this (s): far beyond a synchronised controller's and tracker's.
+pub const CLOCK_BOUND_S: f64 = 0.05;
 
 /// A registration as `report.json` shows it.
 #[derive(Clone, Debug, Serialize)]
@@ -172,14 +188,24 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         range.check(&data.origin, &data.point_ids, &data.q)?;
         Ok(data)
     };
-    let data = read(&options.data, mapping.as_ref())?;
+    // A campaign measured on the fly (a `time` column) is corrected for the clock offset between tracker and
+    // controller first; every method then fits on the corrected samples as on points (calib::clock).
+    let synchronised = |data: Dataset| -> Result<(Dataset, Option<ClockOffset>)> {
+        if data.time.is_none() {
+            return Ok((data, None));
+        }
+        let found = clock::estimate(&dh, &data, CLOCK_BOUND_S)
+            .map_err(|e| e.in_data(&data.origin, "estimating the clock offset"))?;
+        Ok((clock::corrected(&data, found.offset_s)?, Some(found)))
+    };
+    let (data, clock_offset) = synchronised(read(&options.data, mapping.as_ref())?)?;
     let test_file = match &options.test_data {
         Some(path) => {
             let test_mapping = match &options.test_mapping {
                 Some(p) => Some(ColumnMapping::load(p)?),
                 None => mapping.clone(),
             };
-            Some(read(path, test_mapping.as_ref())?)
+            Some(synchronised(read(path, test_mapping.as_ref())?)?.0)
         }
         None => None,
     };
@@ -290,6 +316,11 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         worse_than_nominal: false,
         warnings: Vec::new(),
         test_outside_domain: 0,
+        clock_offset: clock_offset.map(|c| ClockReport {
+            offset_s: c.offset_s,
+            rms_mm: c.rms_m * 1e3,
+            rms_at_zero_mm: c.rms_at_zero_m * 1e3,
+        }),
     };
     report
         .warnings
@@ -371,6 +402,15 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         &format!("Table 1. Positional errors {what}"),
         &format!("Table 2. Orientational errors {what}"),
     )?;
+    if let Some(c) = &report.clock_offset {
+        tables += &format!(
+            "Measured on the fly: a clock offset of {:.1} µs between controller and tracker was removed before \
+             fitting (nominal registration RMS {:.4} mm at it, {:.4} mm at zero)\n",
+            c.offset_s * 1e6,
+            c.rms_mm,
+            c.rms_at_zero_mm
+        );
+    }
     if let Some(k) = &report.test_model_registration {
         tables += &format!(
             "The same test points through the model's own registration (nothing fitted on them): measured \

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use serde_json::json;
 
-use crate::campaign::Simulation;
+use crate::campaign::{Simulation, trajectory};
 use crate::error::{Error, Result};
 use crate::eval::{self, Budget, Evaluation, Stats};
 use crate::scenario::Scenario;
@@ -71,6 +71,8 @@ pub struct CampaignRun {
     pub study: Option<(StudyResult, Duration)>,
     /// With `--replay`: what placed the tracker and the reflector.
     pub replay: Option<ReplayReport>,
+    /// With `[campaign.trajectory]`: what measuring on the fly took and did.
+    pub motion: Option<MotionReport>,
     /// Where the files went.
     pub out: PathBuf,
 }
@@ -87,6 +89,14 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     let started = Instant::now();
     let (sim, replay) = match &options.replay {
         None => (super::simulate(&scenario)?, None),
+        Some(_) if scenario.campaign.trajectory.is_some() => {
+            return Err(Error::Scenario {
+                origin: scenario.origin.clone(),
+                message: "campaign.trajectory with --replay: a replay reproduces the real campaign's points as \
+                          they were measured; drop one"
+                    .into(),
+            });
+        }
         Some(source) => {
             let data = super::replay::read(
                 &scenario.load_robot()?,
@@ -105,6 +115,34 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
             };
             (replay.sim, Some(report))
         }
+    };
+    // Measured on the fly: the planned targets become the waypoints of one path, sampled as the arm moves.
+    let (sim, motion) = match &scenario.campaign.trajectory {
+        Some(config) if replay.is_none() => {
+            let moved = trajectory::measure(
+                &sim.world,
+                &sim.campaign,
+                &scenario.campaign.posture_rad(),
+                config,
+                sim.world.seed(),
+            )
+            .map_err(|e| e.in_scenario(&scenario.origin))?;
+            let motion = MotionReport {
+                targets: sim.campaign.points.len(),
+                samples: moved.campaign.points.len(),
+                duration_s: moved.duration_s,
+                clock_offset_s: config.clock_offset_s,
+                dynamic_max_mm: moved.dynamic_m.iter().fold(0.0, |a: f64, d| a.max(*d)) * 1e3,
+                lost_acceptance_cone: moved.lost_acceptance_cone,
+                lost_line_of_sight: moved.lost_line_of_sight,
+            };
+            let sim = Simulation {
+                world: sim.world,
+                campaign: moved.campaign,
+            };
+            (sim, Some(motion))
+        }
+        _ => (sim, None),
     };
     if replay.is_some() {
         scenario.evaluation = None;
@@ -146,6 +184,10 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     if let Some(r) = &replay {
         report["replay"] =
             serde_json::to_value(r).map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
+    }
+    if let Some(m) = &motion {
+        report["trajectory"] =
+            serde_json::to_value(m).map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
     }
     let mut files: Vec<(String, Vec<u8>)> = vec![
         (
@@ -199,8 +241,28 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         evaluation,
         study,
         replay,
+        motion,
         out,
     })
+}
+
+/// A campaign measured on the fly (`campaign.json`'s `trajectory`).
+#[derive(Clone, Debug, Serialize)]
+pub struct MotionReport {
+    /// The planned targets the path passes through.
+    pub targets: usize,
+    /// The tracker samples kept: the campaign's points.
+    pub samples: usize,
+    /// The path's duration: the tracker time the campaign takes (s).
+    pub duration_s: f64,
+    /// The controller's clock minus the tracker's, as simulated (s): what `calibrate` should find.
+    pub clock_offset_s: f64,
+    /// The largest flange displacement due to the motion over the kept samples (mm).
+    pub dynamic_max_mm: f64,
+    /// Samples the tracker missed between the targets: a reflector turned out of its acceptance cone, or a link
+    /// in the beam.
+    pub lost_acceptance_cone: usize,
+    pub lost_line_of_sight: usize,
 }
 
 /// How a replay placed the simulated tracker and reflector (`campaign.json`'s `replay`).

@@ -203,6 +203,21 @@ fn print(done: &CampaignRun) {
             r.acceptance_cone
         );
     }
+    if let Some(m) = &done.motion {
+        println!(
+            "  measured on the fly: {} samples along one path through {} targets, {:.1} s of tracker time; motion \
+             moved the flange by up to {:.3} mm; clock offset {:.1} µs (calibrate estimates and removes it); \
+             beam lost at {} samples ({} acceptance cone, {} line of sight)",
+            m.samples,
+            m.targets,
+            m.duration_s,
+            m.dynamic_max_mm,
+            m.clock_offset_s * 1e6,
+            m.lost_acceptance_cone + m.lost_line_of_sight,
+            m.lost_acceptance_cone,
+            m.lost_line_of_sight
+        );
+    }
     let row = |name: &str, s: &Stats| {
         let s = s.scaled(1e3);
         println!(

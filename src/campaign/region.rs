@@ -6,6 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::distribution::DistributionKind;
+use super::trajectory::TrajectoryConfig;
 use crate::robot::collision::Obstacle;
 
 /// The most points a region may ask for. The paper measured 2 335 and the real UR10 series a few thousand;
@@ -145,6 +146,10 @@ pub struct CampaignConfig {
     /// How model-based layouts (`d-optimal`) build their candidate pool and choose from it.
     #[serde(default)]
     pub selection: SelectionConfig,
+    /// `[campaign.trajectory]`: measure the planned targets on the fly, along one smooth path, instead of
+    /// stopping at each ([`super::trajectory`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<TrajectoryConfig>,
 }
 
 /// The candidate pool and the model of a model-based layout. The pool is a uniform layout of
@@ -255,6 +260,9 @@ impl CampaignConfig {
                     o.name
                 ));
             }
+        }
+        if let Some(t) = &self.trajectory {
+            t.validate()?;
         }
         self.selection.validate()
     }

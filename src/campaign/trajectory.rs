@@ -19,9 +19,10 @@ use nalgebra::Point3;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::generate::{Campaign, CampaignPoint};
+use super::generate::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
+use crate::robot::collision::CollisionModel;
 use crate::robot::{Frames, forward_kinematics};
 use crate::truth::PathPoint;
 use crate::world::World;
@@ -209,13 +210,18 @@ impl Path {
         self.segments.last().map_or(0.0, |s| s.start + s.duration)
     }
 
+    /// The segment the path is on at time `t` (clamped to the path): segment k ends at waypoint k + 1.
+    pub fn segment(&self, t: f64) -> usize {
+        let t = t.clamp(0.0, self.duration());
+        self.segments
+            .partition_point(|s| s.start + s.duration < t)
+            .min(self.segments.len() - 1)
+    }
+
     /// The commanded sample at time `t` (clamped to the path).
     pub fn at(&self, t: f64) -> PathPoint {
         let t = t.clamp(0.0, self.duration());
-        let k = self
-            .segments
-            .partition_point(|s| s.start + s.duration < t)
-            .min(self.segments.len() - 1);
+        let k = self.segment(t);
         let seg = &self.segments[k];
         let s = ((t - seg.start) / seg.duration).clamp(0.0, 1.0);
         let n = seg.q0.len();
@@ -234,6 +240,10 @@ pub struct TrajectoryCampaign {
     pub duration_s: f64,
     /// Per kept sample, the flange displacement due to the motion (m).
     pub dynamic_m: Vec<f64>,
+    /// Samples the tracker did not record because a reflector faced away from it (outside its acceptance
+    /// cone) or a link blocked the beam: the targets were checked when planned, the path between them is not.
+    pub lost_acceptance_cone: usize,
+    pub lost_line_of_sight: usize,
 }
 
 /// Measures `planned` (a stop-and-go campaign's targets, in its visiting order) on the fly in `world`: the path
@@ -283,24 +293,44 @@ pub fn measure(
         .collect();
     let moved = world.robot.follow(&truth_path, Some(&mut rng))?;
     let mut frames = Frames::new(&world.nominal);
-    let region = planned
-        .points
-        .first()
-        .map_or_else(String::new, |p| p.region.clone());
+    let collision = CollisionModel::new(&world.nominal);
+    let origin = world.tracker.origin();
+    let (mut lost_acceptance_cone, mut lost_line_of_sight) = (0, 0);
     let mut points = Vec::with_capacity(kept.len());
+    let mut dynamic_m = Vec::with_capacity(kept.len());
     for (k, (s, m)) in stamps.iter().zip(&moved).enumerate() {
+        let true_reflectors: Vec<Point3<f64>> =
+            world.mounting.actual.iter().map(|p| m.flange * p).collect();
+        // Where the beam breaks the tracker records nothing (it relocks when the reflector is seen again). The
+        // links are placed at the true angles with nominal geometry: a fraction of a millimetre, against the
+        // beam's clearance.
+        let facing = m.flange.rotation * world.mounting.facing;
+        if !true_reflectors
+            .iter()
+            .all(|p| world.tracker.in_acceptance_cone(p, &facing))
+        {
+            lost_acceptance_cone += 1;
+            continue;
+        }
+        forward_kinematics(&world.nominal, &m.q, &mut frames);
+        if true_reflectors
+            .iter()
+            .any(|p| collision.segment_blocked(&frames, &origin, p, BEAM_END_CLEARANCE_M))
+        {
+            lost_line_of_sight += 1;
+            continue;
+        }
         let logged = path.at(*s).q;
         forward_kinematics(&world.nominal, &logged, &mut frames);
         let nominal_flange = frames.flange;
-        let true_reflectors: Vec<Point3<f64>> =
-            world.mounting.actual.iter().map(|p| m.flange * p).collect();
         let measured = true_reflectors
             .iter()
             .map(|p| world.tracker.measure(p, &mut rng))
             .collect();
         points.push(CampaignPoint {
             id: k,
-            region: region.clone(),
+            // A sample belongs to the region of the target the arm is heading for.
+            region: planned.points[path.segment(*s)].region.clone(),
             q_cmd: logged,
             nominal_flange,
             nominal_reflectors: world
@@ -320,6 +350,14 @@ pub fn measure(
             temperature: None,
             time: Some(*s),
         });
+        dynamic_m.push(m.dynamic_m);
+    }
+    if points.is_empty() {
+        return Err(Error::Invalid(format!(
+            "trajectory: the tracker lost the beam at every one of the {} samples ({lost_acceptance_cone} \
+             outside the acceptance cone, {lost_line_of_sight} blocked)",
+            moved.len()
+        )));
     }
     Ok(TrajectoryCampaign {
         campaign: Campaign {
@@ -328,6 +366,8 @@ pub fn measure(
             rejections: planned.rejections.clone(),
         },
         duration_s: duration,
-        dynamic_m: moved.iter().map(|m| m.dynamic_m).collect(),
+        dynamic_m,
+        lost_acceptance_cone,
+        lost_line_of_sight,
     })
 }
