@@ -164,22 +164,23 @@ fn study(chain: &Chain) -> StudyResult {
         orientation: false,
         limits: Vec::new(),
         trajectory: Vec::new(),
+        trajectory_detail: None,
     }
 }
 
 /// What one entity holds across the whole recording.
 #[derive(Default, Debug)]
-struct Entity {
+pub(crate) struct Entity {
     /// Component identifiers, e.g. `Points3D:positions`.
     components: BTreeSet<String>,
     static_rows: usize,
     /// Rows per timeline name.
-    timeline_rows: BTreeMap<String, usize>,
+    pub(crate) timeline_rows: BTreeMap<String, usize>,
     /// Distinct times per timeline.
-    times: BTreeMap<String, BTreeSet<i64>>,
+    pub(crate) times: BTreeMap<String, BTreeSet<i64>>,
 }
 
-fn decode(bytes: &[u8]) -> BTreeMap<String, Entity> {
+pub(crate) fn decode(bytes: &[u8]) -> BTreeMap<String, Entity> {
     let mut entities: BTreeMap<String, Entity> = BTreeMap::new();
     let decoder = DecoderApp::decode_eager(bytes).expect("an .rrd stream");
     for msg in decoder {
@@ -656,4 +657,100 @@ fn recording_opens_on_a_designed_blueprint_and_is_named_after_the_scenario() {
         ),
         ["n_train_log"]
     );
+}
+
+/// Issue 16: with `[study.trajectory]` the recording holds the detail trajectory (a static path, its samples,
+/// the current sample on the `time` timeline) and the tracker-time comparison on the `tracker_s` timeline: per
+/// method and size, stop and go (points × (move + settle + measure)) and each speed at its tracker time.
+#[test]
+fn recording_shows_the_trajectory_and_the_tracker_time_comparison() {
+    use calibench::study::trajectory::{
+        TrajectoryDetail, TrajectoryRun, TrajectorySample, TrajectoryStudy,
+    };
+    let chain = chain();
+    let mut study = study(&chain);
+    let region = study.regions[0].name.clone();
+    let n = SIZES[2];
+    let speeds = [0.5, 1.0];
+    study.config.trajectory = Some(TrajectoryStudy {
+        speeds: speeds.to_vec(),
+        sizes: vec![n],
+        seeds: 2,
+        acceleration_rad_s2: 5.0,
+        sample_rate_hz: 1000.0,
+        keep_every: 100,
+        clock_offset_s: 0.003,
+        jitter_s: 5e-6,
+        clock_bound_s: 0.05,
+    });
+    // Tracker time: 60 s at half speed, 40 s at full; stop and go is the study's own cost per point.
+    for method in METHODS {
+        for seed in 0..2 {
+            for (k, speed) in speeds.iter().enumerate() {
+                study.trajectory.push(TrajectoryRun {
+                    region: region.clone(),
+                    method: method.to_string(),
+                    speed: *speed,
+                    n_targets: n,
+                    seed,
+                    samples: 500,
+                    tracker_s: [60.0, 40.0][k],
+                    clock_error_s: 1e-5,
+                    dynamic_max_m: 1e-4,
+                    truth: Some(stats(1e-3)),
+                    failure: None,
+                });
+            }
+        }
+    }
+    let samples: Vec<TrajectorySample> = (0..25)
+        .map(|k| TrajectorySample {
+            t: k as f64 * 0.1,
+            true_position: Point3::new(0.6, -0.3 + 0.02 * k as f64, 0.4),
+            error_after: 1e-5 * k as f64,
+            dynamic: 1e-6 * k as f64,
+        })
+        .collect();
+    study.trajectory_detail = Some(TrajectoryDetail {
+        region: region.clone(),
+        method: METHODS[0].into(),
+        speed: 1.0,
+        n_targets: n,
+        samples,
+    });
+    let bytes = recording::record(&study, &chain, "# Summary\n").expect("recording");
+    let entities = decode(&bytes);
+
+    let path = entity(&entities, "world/trajectory/path");
+    assert_has(path, "world/trajectory/path", &["LineStrips3D:strips"]);
+    assert_eq!(path.static_rows, 1);
+    let all = entity(&entities, "world/trajectory/samples");
+    assert_has(
+        all,
+        "world/trajectory/samples",
+        &["Points3D:positions", "Points3D:colors"],
+    );
+    let current = entity(&entities, "world/trajectory/current");
+    assert_eq!(current.timeline_rows.get("time"), Some(&25));
+    // Duration timelines are stored in nanoseconds.
+    assert!(
+        current.times["time"].contains(&2_400_000_000),
+        "{:?}",
+        current.times["time"]
+    );
+    assert_eq!(entity(&entities, "legend_trajectory").static_rows, 1);
+
+    let stop_s = (study.config.campaign_points(n) as f64
+        * (study.config.move_s + study.config.settle_s + study.config.measure_s))
+        .round() as i64;
+    for method in METHODS {
+        let p = format!("tracker_time/{region}/{n}/{method}");
+        let e = entity(&entities, &p);
+        assert_has(e, &p, &["Scalars:scalars", "SeriesLines:names"]);
+        assert_eq!(
+            e.times["tracker_s"],
+            BTreeSet::from([40, 60, stop_s]),
+            "{p}"
+        );
+    }
 }

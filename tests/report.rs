@@ -159,6 +159,7 @@ pub fn study(orientation: bool) -> StudyResult {
             repeatability_mean: 0.012e-3,
         }],
         trajectory: Vec::new(),
+        trajectory_detail: None,
     }
 }
 

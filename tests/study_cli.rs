@@ -86,9 +86,21 @@ fn metrics_and_summary_do_not_depend_on_the_thread_count() {
         "campaign.rrd",
         "plots/learning_curves_paper.png",
         "plots/histogram_hybrid.png",
+        "plots/tracker_time_paper.png",
+        "trajectory.csv",
     ] {
         assert!(one.join(name).is_file(), "{name} missing");
     }
+    // The recording shows the trajectory (the 20-target path at speed 0.5, with `hybrid`'s error) and the
+    // tracker-time comparison (stop and go and the one speed).
+    let entities = crate::recording::decode(&read(&one.join("campaign.rrd")));
+    let current = &entities["world/trajectory/current"];
+    let samples = current.timeline_rows["time"];
+    assert!(samples > 20, "{samples} samples on the time timeline");
+    assert_eq!(
+        entities["tracker_time/paper/20/hybrid"].times["tracker_s"].len(),
+        2
+    );
 }
 
 #[test]

@@ -264,23 +264,32 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
         contents: vec!["+ $origin/**".into(), "- /world/tracker/beams".into()],
         eye,
     };
+    let mut documents = vec![
+        view(
+            "TextDocument",
+            "summary".into(),
+            "/summary",
+            vec!["+ $origin".into()],
+        ),
+        view(
+            "TextDocument",
+            "legend".into(),
+            "/legend",
+            vec!["+ $origin".into()],
+        ),
+    ];
+    if study.trajectory_detail.is_some() {
+        documents.push(view(
+            "TextDocument",
+            "trajectory".into(),
+            "/legend_trajectory",
+            vec!["+ $origin".into()],
+        ));
+    }
     let documents = Part::Container {
         kind: ContainerKind::Tabs,
         name: "summary".into(),
-        children: vec![
-            view(
-                "TextDocument",
-                "summary".into(),
-                "/summary",
-                vec!["+ $origin".into()],
-            ),
-            view(
-                "TextDocument",
-                "legend".into(),
-                "/legend",
-                vec!["+ $origin".into()],
-            ),
-        ],
+        children: documents,
         shares: Vec::new(),
     };
     let mut curves = Vec::new();
@@ -302,6 +311,16 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
                 vec!["+ $origin/**".into()],
             ));
         }
+    }
+    // The tracker-time comparison, plotted over the `tracker_s` timeline (the viewer opens on another: the
+    // legend says to select it).
+    if !study.trajectory.is_empty() {
+        curves.push(view(
+            "TimeSeries",
+            "tracker time: ground-truth mean (mm) vs tracker seconds (timeline tracker_s)".into(),
+            "/tracker_time",
+            vec!["+ $origin/**".into()],
+        ));
     }
     let histograms: Vec<Part> = study
         .detail

@@ -12,6 +12,7 @@ pub mod recording;
 pub mod summary;
 pub mod tables;
 pub mod trajectory;
+pub mod trajectory_recording;
 
 use crate::error::Result;
 use crate::robot::Chain;
@@ -32,6 +33,7 @@ pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Ve
     }
     files.extend(plots::learning_curves_png(study)?);
     files.extend(plots::histograms_png(study)?);
+    files.extend(plots::tracker_time_png(study)?);
     files.push((
         "campaign.rrd".into(),
         recording::record(study, chain, &summary)?,

@@ -447,3 +447,102 @@ fn histogram_panel(
         .draw()?;
     Ok(())
 }
+
+/// A method's colour index, name and (tracker minutes, mean mm) points.
+type MethodLine<'a> = (usize, &'a str, Vec<(f64, f64)>);
+
+/// One PNG per region, `plots/tracker_time_<region>.png` (`[study.trajectory]`): the ground-truth mean (mm)
+/// against the tracker time (min, log scale), one panel per number of targets, a line per method through its
+/// trajectories at each speed and its stop-and-go campaign (the rightmost point).
+pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
+    let rows = super::trajectory::comparison(study);
+    let mut regions: Vec<&str> = rows.iter().map(|r| r.region.as_str()).collect();
+    regions.dedup();
+    let mut out = Vec::new();
+    for region in regions {
+        let mut sizes: Vec<usize> = rows
+            .iter()
+            .filter(|r| r.region == region)
+            .map(|r| r.n_targets)
+            .collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        let name = format!("plots/tracker_time_{}.png", file_safe(region));
+        let (pw, ph) = (1045u32, 680u32);
+        let png = render(&name, (pw * sizes.len() as u32, ph), |root| {
+            for (panel, &n) in root.split_evenly((1, sizes.len())).iter().zip(&sizes) {
+                let lines: Vec<MethodLine> = rows
+                    .iter()
+                    .filter(|r| r.region == region && r.n_targets == n)
+                    .map(|r| {
+                        let mut pts: Vec<(f64, f64)> = std::iter::once(r.stop)
+                            .chain(r.speeds.iter().map(|(_, m)| *m))
+                            .filter_map(|m| Some((m.tracker_s? / 60.0, m.mean_mm?)))
+                            .filter(|p| p.0 > 0.0 && p.1.is_finite())
+                            .collect();
+                        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                        let i = study
+                            .config
+                            .methods
+                            .iter()
+                            .position(|m| *m == r.method)
+                            .unwrap_or(0);
+                        (i, r.method.as_str(), pts)
+                    })
+                    .collect();
+                let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.2.clone()).collect();
+                if all.is_empty() {
+                    panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
+                    continue;
+                }
+                let mut xs: Vec<f64> = all.iter().map(|p| p.0).collect();
+                let (x0, x1) = min_max(&xs);
+                xs.sort_by(f64::total_cmp);
+                xs.dedup_by(|a, b| (*a - *b).abs() < 0.05 * *b);
+                let (_, y1) = min_max(&all.iter().map(|p| p.1).collect::<Vec<_>>());
+                let mut chart = ChartBuilder::on(panel)
+                    .caption(
+                        format!("region {region}, {n} targets: accuracy against tracker time"),
+                        (FAMILY, 24),
+                    )
+                    .margin(16)
+                    .x_label_area_size(56)
+                    .y_label_area_size(86)
+                    .build_cartesian_2d(
+                        (x0 / 1.3..x1 * 1.3).log_scale().with_key_points(xs),
+                        0.0..y1 * 1.1,
+                    )?;
+                chart
+                    .configure_mesh()
+                    .x_desc("tracker time (min, log scale); rightmost point: stop and go")
+                    .y_desc("ground-truth mean error (mm)")
+                    .x_label_formatter(&|x| format!("{x:.1}"))
+                    .y_label_formatter(&|y| format!("{y:.2}"))
+                    .label_style((FAMILY, 17))
+                    .axis_desc_style((FAMILY, 19))
+                    .light_line_style(RGBColor(235, 235, 235))
+                    .draw()?;
+                for (i, method, pts) in &lines {
+                    let c = colour(*i);
+                    chart
+                        .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
+                        .label(*method)
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                        });
+                    chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
+                }
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::LowerLeft)
+                    .label_font((FAMILY, 15))
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(RGBColor(200, 200, 200))
+                    .draw()?;
+            }
+            Ok(())
+        })?;
+        out.push((name, png));
+    }
+    Ok(out)
+}

@@ -12,6 +12,8 @@
 //! * `n_train` (sequence): the training-set size of the learning curves.
 //! * `n_train_log` (sequence): the same sizes as round(1000 · log10 n) — a log axis for the curves, on which the
 //!   viewer opens (2000 = 100 points, 3000 = 1000).
+//! * `time` (duration): the tracker's clock along the detail trajectory (`[study.trajectory]`).
+//! * `tracker_s` (sequence): tracker seconds, the x axis of the tracker-time comparison.
 //!
 //! The robot's first pose is also logged at time 0 of both `n_train` timelines, so it stays drawn there.
 //! Everything else is static.
@@ -42,6 +44,11 @@
 //! | `histograms/<method>/before`, `histograms/<method>/after` | `BarChart` (counts; abscissa = bin centres, mm) | static |
 //! | `curves/<region>/<distribution>/<method>` | `SeriesLines` (named `<method> (mm)`, coloured as in the PNG, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train` and `n_train_log`, one row per size with an OK seed |
 //! | `legend` | `TextDocument` (markdown): the colour scales and the arrow factor | static |
+//! | `world/trajectory/path` | `LineStrips3D`, the detail trajectory's true reflector path (`[study.trajectory]`) | static |
+//! | `world/trajectory/samples` | `Points3D`, its samples coloured by the detail method's error there | static |
+//! | `world/trajectory/current` | `Points3D`, the sample at the tracker's time | `time` (duration, s), one row per sample |
+//! | `legend_trajectory` | `TextDocument` (markdown): what the trajectory shows and its colour scale | static |
+//! | `tracker_time/<region>/<targets>/<method>` | `SeriesLines` + `Scalars` (median ground-truth mean, mm): stop and go and each speed at their tracker time | `tracker_s` (sequence, whole seconds), one row per way of measuring |
 //! | `summary` | `TextDocument` (markdown): the study summary | static |
 //!
 //! # Colours
@@ -198,7 +205,7 @@ pub fn viridis(value: f64, scale: f64) -> [u8; 4] {
 }
 
 /// The smallest 1-2-5 number ≥ `value` (and ≥ 0.001), for colour scales in mm.
-fn nice_ceiling(value: f64) -> f64 {
+pub(super) fn nice_ceiling(value: f64) -> f64 {
     let v = if value.is_finite() {
         value.max(1e-3)
     } else {
@@ -223,7 +230,7 @@ fn f3(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
 
-fn p3(p: &Point3<f64>) -> [f32; 3] {
+pub(super) fn p3(p: &Point3<f64>) -> [f32; 3] {
     [p.x as f32, p.y as f32, p.z as f32]
 }
 
@@ -297,6 +304,7 @@ fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &
     )?;
     log_histograms(rec, study)?;
     log_curves(rec, study)?;
+    super::trajectory_recording::log_trajectory(rec, study)?;
 
     let legend = format!(
         "# Legend\n\n\

@@ -88,6 +88,98 @@ fn cell(v: Option<f64>) -> String {
     v.map_or("—".into(), |x| format!("{x:.4}"))
 }
 
+/// One way of measuring the targets: its tracker time (s) and the ground-truth mean it gives (mm), medians over
+/// the seeds; `None` where no run of it succeeded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measuring {
+    pub tracker_s: Option<f64>,
+    pub mean_mm: Option<f64>,
+}
+
+/// One method through one set of targets, measured stop and go and on the fly at each speed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    pub region: String,
+    pub method: String,
+    pub n_targets: usize,
+    pub stop: Measuring,
+    /// In the order of `[study.trajectory] speeds`, with the speed.
+    pub speeds: Vec<(f64, Measuring)>,
+}
+
+/// The tracker-time comparison, in the order (region, method, targets): what the summary's table, the plot and
+/// the recording show.
+pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
+    let t = &study.trajectory;
+    let Some(cfg) = study.config.trajectory.as_ref() else {
+        return Vec::new();
+    };
+    let per_point = study.config.move_s + study.config.settle_s + study.config.measure_s;
+    let mut regions: Vec<&str> = t.iter().map(|r| r.region.as_str()).collect();
+    regions.dedup();
+    let mut methods: Vec<&str> = Vec::new();
+    for r in t {
+        if !methods.contains(&r.method.as_str()) {
+            methods.push(&r.method);
+        }
+    }
+    let mut out = Vec::new();
+    for region in regions {
+        for m in &methods {
+            for &n in &cfg.sizes {
+                let stop: Vec<f64> = study
+                    .runs
+                    .iter()
+                    .filter(|r| {
+                        r.key.region == region
+                            && r.key.method == *m
+                            && r.key.n_train == n
+                            && r.key.distribution == DistributionKind::Uniform
+                            && r.key.seed < cfg.seeds
+                    })
+                    .filter_map(|r| r.truth.as_ref().map(|s| mm(s.mean)))
+                    .collect();
+                let speeds = cfg
+                    .speeds
+                    .iter()
+                    .map(|&speed| {
+                        let these: Vec<&TrajectoryRun> = t
+                            .iter()
+                            .filter(|r| {
+                                r.region == region
+                                    && r.method == *m
+                                    && r.n_targets == n
+                                    && r.speed == speed
+                            })
+                            .collect();
+                        let measuring = Measuring {
+                            tracker_s: median(these.iter().map(|r| r.tracker_s).collect()),
+                            mean_mm: median(
+                                these
+                                    .iter()
+                                    .filter_map(|r| r.truth.as_ref().map(|s| mm(s.mean)))
+                                    .collect(),
+                            ),
+                        };
+                        (speed, measuring)
+                    })
+                    .collect();
+                out.push(Comparison {
+                    region: region.to_string(),
+                    method: m.to_string(),
+                    n_targets: n,
+                    stop: Measuring {
+                        tracker_s: Some(study.config.campaign_points(n) as f64 * per_point),
+                        mean_mm: median(stop),
+                    },
+                    speeds,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// The summary's section; empty without trajectory runs.
 pub fn trajectory_md(study: &StudyResult, out: &mut String) {
     let t = &study.trajectory;
@@ -119,12 +211,7 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
     );
     let mut regions: Vec<&str> = t.iter().map(|r| r.region.as_str()).collect();
     regions.dedup();
-    let mut methods: Vec<&str> = Vec::new();
-    for r in t {
-        if !methods.contains(&r.method.as_str()) {
-            methods.push(&r.method);
-        }
-    }
+    let rows = comparison(study);
     for region in regions {
         if study.regions.len() > 1 {
             let _ = writeln!(out, "Region `{region}`:\n");
@@ -136,53 +223,25 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
             rule += "---:|";
         }
         let _ = writeln!(out, "{head}\n{rule}");
-        for m in &methods {
-            for &n in &cfg.sizes {
-                let stop: Vec<f64> = study
-                    .runs
-                    .iter()
-                    .filter(|r| {
-                        r.key.region == region
-                            && r.key.method == *m
-                            && r.key.n_train == n
-                            && r.key.distribution == DistributionKind::Uniform
-                            && r.key.seed < cfg.seeds
-                    })
-                    .filter_map(|r| r.truth.as_ref().map(|s| mm(s.mean)))
-                    .collect();
-                let points = study.config.campaign_points(n) as f64;
+        for row in rows.iter().filter(|r| r.region == region) {
+            let _ = write!(
+                out,
+                "| `{}` | {} | {:.1} / {} |",
+                row.method,
+                row.n_targets,
+                row.stop.tracker_s.unwrap_or(f64::NAN) / 60.0,
+                cell(row.stop.mean_mm)
+            );
+            for (_, p) in &row.speeds {
                 let _ = write!(
                     out,
-                    "| `{m}` | {n} | {:.1} / {} |",
-                    points * per_point / 60.0,
-                    cell(median(stop))
+                    " {} / {} |",
+                    p.tracker_s
+                        .map_or("—".into(), |x| format!("{:.1}", x / 60.0)),
+                    cell(p.mean_mm)
                 );
-                for &speed in &cfg.speeds {
-                    let these: Vec<&TrajectoryRun> = t
-                        .iter()
-                        .filter(|r| {
-                            r.region == region
-                                && r.method == *m
-                                && r.n_targets == n
-                                && r.speed == speed
-                        })
-                        .collect();
-                    let minutes = median(these.iter().map(|r| r.tracker_s / 60.0).collect());
-                    let acc = median(
-                        these
-                            .iter()
-                            .filter_map(|r| r.truth.as_ref().map(|s| mm(s.mean)))
-                            .collect(),
-                    );
-                    let _ = write!(
-                        out,
-                        " {} / {} |",
-                        minutes.map_or("—".into(), |x| format!("{x:.1}")),
-                        cell(acc)
-                    );
-                }
-                out.push('\n');
             }
+            out.push('\n');
         }
         out.push('\n');
         let clock: Vec<f64> = t

@@ -141,4 +141,6 @@ pub struct StudyResult {
     pub limits: Vec<Limits>,
     /// The trajectory campaigns' runs (`[study.trajectory]`; empty without it).
     pub trajectory: Vec<trajectory::TrajectoryRun>,
+    /// The trajectory the recording shows sample by sample.
+    pub trajectory_detail: Option<trajectory::TrajectoryDetail>,
 }

@@ -69,6 +69,9 @@ pub struct StudyPart {
     pub limits: Vec<Limits>,
     /// The trajectory runs, computed by shard 0 alone.
     pub trajectory: Vec<super::trajectory::TrajectoryRun>,
+    /// The trajectory shown sample by sample (shard 0).
+    #[serde(default)]
+    pub trajectory_detail: Option<super::trajectory::TrajectoryDetail>,
 }
 
 /// The study of `parts` (one unsharded part, or every shard's): runs in the configuration's order (region,
@@ -106,7 +109,9 @@ pub fn assemble(
     let mut runs = Vec::new();
     let mut details = Vec::new();
     let mut trajectory = Vec::new();
+    let mut trajectory_detail = None;
     for part in parts {
+        trajectory_detail = trajectory_detail.or(part.trajectory_detail);
         runs.extend(part.runs);
         details.extend(part.detail);
         trajectory.extend(part.trajectory);
@@ -141,6 +146,7 @@ pub fn assemble(
         orientation: world.mounting.count() >= 3,
         limits,
         trajectory,
+        trajectory_detail,
     }
 }
 

@@ -253,7 +253,10 @@ pub fn run_part(
             &shared.kinds,
             &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
         )?,
-        _ => Vec::new(),
+        _ => super::trajectory::TrajectoryOutcome {
+            runs: Vec::new(),
+            detail: None,
+        },
     };
     Ok(StudyPart {
         shard,
@@ -262,7 +265,8 @@ pub fn run_part(
         runs: keyed.into_iter().map(|(_, run)| run).collect(),
         detail: details.into_iter().max_by_key(|d| d.n_train),
         limits: shared.regions.iter().map(|r| r.limits.clone()).collect(),
-        trajectory,
+        trajectory: trajectory.runs,
+        trajectory_detail: trajectory.detail,
     })
 }
 

@@ -9,6 +9,7 @@
 //! static ground-truth grid — the arm used point to point afterwards. A trajectory costs its duration; a
 //! stop-and-go campaign `move_s + settle_s + measure_s` per point ([`super::StudyConfig`]).
 
+use nalgebra::Point3;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -16,10 +17,12 @@ use serde::{Deserialize, Serialize};
 use super::StudyConfig;
 use super::measure::{Measure, campaign_seed, layout_index};
 use crate::calib::clock;
-use crate::calib::method::FitContext;
+use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
 use crate::campaign::DistributionKind;
-use crate::campaign::trajectory::{self, TrajectoryConfig};
+use crate::campaign::generate::TruePoint;
+use crate::campaign::trajectory::{self, TrajectoryCampaign, TrajectoryConfig};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::Stats;
 use crate::eval::accuracy::{GroundTruth, truth_errors};
@@ -110,7 +113,38 @@ pub struct TrajectoryRun {
     pub failure: Option<String>,
 }
 
-/// Every trajectory run of the study, in the order (region, size, seed, speed, method).
+/// One sample of the trajectory shown in the recording.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct TrajectorySample {
+    /// Tracker time (s).
+    pub t: f64,
+    /// Where the reflector really was (world frame, m).
+    pub true_position: Point3<f64>,
+    /// |prediction − truth| of the detail method at the sample's clock-corrected joint readings (m): what the
+    /// static model leaves of the arm in motion.
+    pub error_after: f64,
+    /// The flange displacement due to the motion (m).
+    pub dynamic: f64,
+}
+
+/// The trajectory shown sample by sample: the first region's, through the most targets, seed 0, at the highest
+/// speed (where the motion matters most), with the study's detail method.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct TrajectoryDetail {
+    pub region: String,
+    pub method: String,
+    pub speed: f64,
+    pub n_targets: usize,
+    pub samples: Vec<TrajectorySample>,
+}
+
+/// What the trajectory campaigns gave.
+pub struct TrajectoryOutcome {
+    pub runs: Vec<TrajectoryRun>,
+    pub detail: Option<TrajectoryDetail>,
+}
+
+/// Every trajectory run of the study, in the order (region, size, seed, speed, method), and the detail.
 pub(super) fn run(
     measure: &Measure,
     config: &StudyConfig,
@@ -118,9 +152,11 @@ pub(super) fn run(
     ctx: &FitContext,
     kinds: &[MethodKind],
     truth: &[&GroundTruth],
-) -> Result<Vec<TrajectoryRun>> {
+) -> Result<TrajectoryOutcome> {
     let world = measure.world;
     let posture = measure.campaign.posture_rad();
+    let detail_n = study.sizes.iter().copied().max().unwrap_or(0);
+    let detail_speed = study.speeds.iter().copied().fold(0.0, f64::max);
     let mut jobs = Vec::new();
     for r in 0..measure.regions.len() {
         for &n in &study.sizes {
@@ -131,7 +167,7 @@ pub(super) fn run(
             }
         }
     }
-    let out: Vec<Vec<TrajectoryRun>> = jobs
+    let out: Vec<(Vec<TrajectoryRun>, Option<TrajectoryDetail>)> = jobs
         .par_iter()
         .map(|&(r, n, seed, speed)| {
             let region = &measure.regions[r].name;
@@ -160,6 +196,7 @@ pub(super) fn run(
                     })
                     .collect::<Vec<_>>()
             };
+            let failed = |reason: String| (failed(reason), None);
             let measured = measure
                 .campaign(r, DistributionKind::Uniform, config.campaign_points(n), key)
                 .and_then(|planned| {
@@ -183,25 +220,43 @@ pub(super) fn run(
                 if val.is_empty() {
                     return Err(Error::Invalid("too few samples to validate".into()));
                 }
-                Ok((data.subset(&train), data.subset(&val), offset.offset_s))
+                Ok((
+                    data.subset(&train),
+                    data.subset(&val),
+                    offset.offset_s,
+                    data,
+                ))
             })();
-            let (train, val, offset) = match prepared {
+            let (train, val, offset, data) = match prepared {
                 Ok(p) => p,
                 Err(e) => return failed(e.detail()),
             };
             let dynamic_max_m = measured.dynamic_m.iter().fold(0.0f64, |a, b| a.max(*b));
-            kinds
+            let shown = r == 0 && n == detail_n && seed == 0 && speed == detail_speed;
+            let mut detail = None;
+            let runs = kinds
                 .iter()
                 .map(|&kind| {
                     let fitted = registry::fit(kind, ctx, &train, &val);
                     let (truth, failure) = match fitted {
-                        Ok(model) => (
-                            Stats::of(
-                                &truth_errors(model.as_ref(), truth[r], &truth[r].grid.points)
-                                    .position,
-                            ),
-                            None,
-                        ),
+                        Ok(model) => {
+                            if shown && kind.name() == config.detail_method() {
+                                detail = Some(sampled(
+                                    model.as_ref(),
+                                    truth[r],
+                                    &measured,
+                                    &data,
+                                    (region, speed, n),
+                                ));
+                            }
+                            (
+                                Stats::of(
+                                    &truth_errors(model.as_ref(), truth[r], &truth[r].grid.points)
+                                        .position,
+                                ),
+                                None,
+                            )
+                        }
                         Err(e) => (None, Some(e.detail())),
                     };
                     TrajectoryRun {
@@ -218,8 +273,60 @@ pub(super) fn run(
                         failure,
                     }
                 })
-                .collect()
+                .collect();
+            (runs, detail)
         })
         .collect();
-    Ok(out.into_iter().flatten().collect())
+    let mut outcome = TrajectoryOutcome {
+        runs: Vec::new(),
+        detail: None,
+    };
+    for (runs, detail) in out {
+        outcome.runs.extend(runs);
+        outcome.detail = outcome.detail.or(detail);
+    }
+    Ok(outcome)
+}
+
+/// The detail method's error at every sample of `measured` (`data`: the same samples, clock-corrected).
+fn sampled(
+    model: &dyn Fitted,
+    truth: &GroundTruth,
+    measured: &TrajectoryCampaign,
+    data: &Dataset,
+    (region, speed, n_targets): (&str, f64, usize),
+) -> TrajectoryDetail {
+    let points: Vec<TruePoint> = measured
+        .campaign
+        .points
+        .iter()
+        .zip(&data.q)
+        .map(|(p, q)| TruePoint {
+            region: p.region.clone(),
+            q_cmd: q.clone(),
+            nominal_flange: p.nominal_flange,
+            true_flange: p.true_flange,
+            true_reflectors: p.true_reflectors.clone(),
+        })
+        .collect();
+    let errors = truth_errors(model, truth, &points).position;
+    TrajectoryDetail {
+        region: region.to_string(),
+        method: model.info().name.to_string(),
+        speed,
+        n_targets,
+        samples: measured
+            .campaign
+            .points
+            .iter()
+            .zip(errors)
+            .zip(&measured.dynamic_m)
+            .map(|((p, e), d)| TrajectorySample {
+                t: p.time.unwrap_or(f64::NAN),
+                true_position: p.true_reflectors[0],
+                error_after: e,
+                dynamic: *d,
+            })
+            .collect(),
+    }
 }
