@@ -682,6 +682,7 @@ fn recording_shows_the_trajectory_and_the_tracker_time_comparison() {
         clock_offset_s: 0.003,
         jitter_s: 5e-6,
         clock_bound_s: 0.05,
+        motion_inputs: false,
     });
     // Tracker time: 60 s at half speed, 40 s at full; stop and go is the study's own cost per point.
     for method in METHODS {

@@ -336,12 +336,22 @@ pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<PointErrors> {
 
 /// True (mapped into the method's frame) vs predicted at the commands of `points`.
 pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> PointErrors {
+    truth_errors_with(model, truth, points, &[])
+}
+
+/// [`truth_errors`] with the model's extra inputs set to `inputs` at every point (empty: their training means).
+pub fn truth_errors_with(
+    model: &dyn Fitted,
+    truth: &GroundTruth,
+    points: &[TruePoint],
+    inputs: &[f64],
+) -> PointErrors {
     let to_method = truth.to_method(model);
     let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<(f64, Option<f64>)> = points
         .par_iter()
         .map(|p| {
-            let pred = model.predict(&p.q_cmd);
+            let pred = model.predict_with(&p.q_cmd, inputs);
             let position = to_method * truth.position(&p.true_flange);
             let angle = truth
                 .orientation(&p.true_flange)

@@ -481,12 +481,7 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                             .filter(|p| p.0 > 0.0 && p.1.is_finite())
                             .collect();
                         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        let i = study
-                            .config
-                            .methods
-                            .iter()
-                            .position(|m| *m == r.method)
-                            .unwrap_or(0);
+                        let i = super::trajectory::method_index(study, &r.method);
                         (i, r.method.as_str(), pts)
                     })
                     .collect();
@@ -524,12 +519,21 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                     .draw()?;
                 for (i, method, pts) in &lines {
                     let c = colour(*i);
-                    chart
-                        .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-                        .label(*method)
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                        });
+                    // Fitted with the motion as inputs: dashed, in its method's colour.
+                    let dash = method.ends_with(crate::study::trajectory::MOTION_SUFFIX);
+                    let drawn = if dash {
+                        chart.draw_series(DashedLineSeries::new(
+                            pts.clone(),
+                            10,
+                            6,
+                            c.stroke_width(2),
+                        ))?
+                    } else {
+                        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
+                    };
+                    drawn.label(*method).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                    });
                     chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
                 }
                 chart

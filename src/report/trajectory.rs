@@ -11,7 +11,7 @@ use super::metrics::mm;
 use crate::campaign::DistributionKind;
 use crate::error::{Error, Result};
 use crate::study::StudyResult;
-use crate::study::trajectory::TrajectoryRun;
+use crate::study::trajectory::{MOTION_SUFFIX, TrajectoryRun};
 
 const COLUMNS: [&str; 13] = [
     "region",
@@ -126,13 +126,15 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
     let mut out = Vec::new();
     for region in regions {
         for m in &methods {
+            // A method fitted with the motion as inputs is measured stop and go as itself (no motion there).
+            let base = m.strip_suffix(MOTION_SUFFIX).unwrap_or(m);
             for &n in &cfg.sizes {
                 let stop: Vec<f64> = study
                     .runs
                     .iter()
                     .filter(|r| {
                         r.key.region == region
-                            && r.key.method == *m
+                            && r.key.method == base
                             && r.key.n_train == n
                             && r.key.distribution == DistributionKind::Uniform
                             && r.key.seed < cfg.seeds
@@ -180,6 +182,18 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
     out
 }
 
+/// The position of `method` (or of the method it was fitted as, without the motion suffix) in the study's
+/// methods: its colour in the plots and the recording.
+pub fn method_index(study: &StudyResult, method: &str) -> usize {
+    let base = method.strip_suffix(MOTION_SUFFIX).unwrap_or(method);
+    study
+        .config
+        .methods
+        .iter()
+        .position(|m| m == base)
+        .unwrap_or(0)
+}
+
 /// The summary's section; empty without trajectory runs.
 pub fn trajectory_md(study: &StudyResult, out: &mut String) {
     let t = &study.trajectory;
@@ -211,6 +225,14 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
     );
     let mut regions: Vec<&str> = t.iter().map(|r| r.region.as_str()).collect();
     regions.dedup();
+    if cfg.motion_inputs {
+        let _ = writeln!(
+            out,
+            "A `+ motion` row is the method fitted on the same samples with the motion as extra inputs (per joint, \
+             the torque the commanded motion needs beyond gravity on the nominal model, Nm, which the controller \
+             can compute) and judged at rest (those inputs zero); its stop-and-go column is the method's own.\n"
+        );
+    }
     let rows = comparison(study);
     for region in regions {
         if study.regions.len() > 1 {

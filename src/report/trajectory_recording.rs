@@ -69,7 +69,6 @@ pub(super) fn log_trajectory(rec: &RecordingStream, study: &StudyResult) -> Resu
         rec.log_static("legend_trajectory", &TextDocument::from_markdown(legend))
             .map_err(rerun_error)?;
     }
-    let methods: Vec<&String> = study.config.methods.iter().collect();
     for row in comparison(study) {
         let path = format!(
             "tracker_time/{}/{}/{}",
@@ -77,7 +76,7 @@ pub(super) fn log_trajectory(rec: &RecordingStream, study: &StudyResult) -> Resu
             row.n_targets,
             sanitize(&row.method)
         );
-        let color = palette(methods.iter().position(|m| **m == row.method).unwrap_or(0));
+        let color = palette(super::trajectory::method_index(study, &row.method));
         rec.log_static(
             path.as_str(),
             &SeriesLines::new()

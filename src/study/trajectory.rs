@@ -9,7 +9,7 @@
 //! static ground-truth grid — the arm used point to point afterwards. A trajectory costs its duration; a
 //! stop-and-go campaign `move_s + settle_s + measure_s` per point ([`super::StudyConfig`]).
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -22,12 +22,14 @@ use crate::calib::registry::{self, MethodKind};
 use crate::campaign::DistributionKind;
 use crate::campaign::generate::TruePoint;
 use crate::campaign::trajectory::{self, TrajectoryCampaign, TrajectoryConfig};
-use crate::dataset::Dataset;
+use crate::dataset::{Dataset, ExtraInputs};
 use crate::error::{Error, Result};
 use crate::eval::Stats;
-use crate::eval::accuracy::{GroundTruth, truth_errors};
+use crate::eval::accuracy::{GroundTruth, truth_errors, truth_errors_with};
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
+use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
+use crate::robot::{Frames, forward_kinematics};
 
 /// `[study.trajectory]`: trajectory campaigns beside the stop-and-go ones. Magnitudes and their sources in
 /// `scenarios/README.md`.
@@ -48,6 +50,11 @@ pub struct TrajectoryStudy {
     pub jitter_s: f64,
     /// The clock offset is searched within ±this (s).
     pub clock_bound_s: f64,
+    /// Also fit every method that regresses on extra inputs with the motion as inputs (`<method> + motion`):
+    /// per joint, the torque the commanded motion needs beyond gravity on the nominal model (Nm), which the
+    /// controller knows; judged on the static grid with those inputs at zero (the arm at rest).
+    #[serde(default)]
+    pub motion_inputs: bool,
 }
 
 impl TrajectoryStudy {
@@ -220,21 +227,31 @@ pub(super) fn run(
                 if val.is_empty() {
                     return Err(Error::Invalid("too few samples to validate".into()));
                 }
-                Ok((
-                    data.subset(&train),
-                    data.subset(&val),
-                    offset.offset_s,
-                    data,
-                ))
+                Ok((train, val, offset.offset_s, data))
             })();
-            let (train, val, offset, data) = match prepared {
+            let (train_rows, val_rows, offset, data) = match prepared {
                 Ok(p) => p,
                 Err(e) => return failed(e.detail()),
             };
+            let (train, val) = (data.subset(&train_rows), data.subset(&val_rows));
             let dynamic_max_m = measured.dynamic_m.iter().fold(0.0f64, |a, b| a.max(*b));
             let shown = r == 0 && n == detail_n && seed == 0 && speed == detail_speed;
             let mut detail = None;
-            let runs = kinds
+            let run_of =
+                |method: String, truth: Option<Stats>, failure: Option<String>| TrajectoryRun {
+                    region: region.clone(),
+                    method,
+                    speed,
+                    n_targets: n,
+                    seed,
+                    samples: train.len() + val.len(),
+                    tracker_s: measured.duration_s,
+                    clock_error_s: offset - study.clock_offset_s,
+                    dynamic_max_m,
+                    truth,
+                    failure,
+                };
+            let mut runs: Vec<TrajectoryRun> = kinds
                 .iter()
                 .map(|&kind| {
                     let fitted = registry::fit(kind, ctx, &train, &val);
@@ -259,21 +276,36 @@ pub(super) fn run(
                         }
                         Err(e) => (None, Some(e.detail())),
                     };
-                    TrajectoryRun {
-                        region: region.clone(),
-                        method: kind.name().to_string(),
-                        speed,
-                        n_targets: n,
-                        seed,
-                        samples: train.len() + val.len(),
-                        tracker_s: measured.duration_s,
-                        clock_error_s: offset - study.clock_offset_s,
-                        dynamic_max_m,
-                        truth,
-                        failure,
-                    }
+                    run_of(kind.name().to_string(), truth, failure)
                 })
                 .collect();
+            if study.motion_inputs {
+                let moving = with_motion_inputs(&data, &measured.path, offset, world, ctx);
+                let (train, val) = (moving.subset(&train_rows), moving.subset(&val_rows));
+                let at_rest = vec![0.0; world.nominal.dof()];
+                for &kind in kinds.iter().filter(|k| k.info().takes_inputs) {
+                    let (truth, failure) = match registry::fit(kind, ctx, &train, &val) {
+                        Ok(model) => (
+                            Stats::of(
+                                &truth_errors_with(
+                                    model.as_ref(),
+                                    truth[r],
+                                    &truth[r].grid.points,
+                                    &at_rest,
+                                )
+                                .position,
+                            ),
+                            None,
+                        ),
+                        Err(e) => (None, Some(e.detail())),
+                    };
+                    runs.push(run_of(
+                        format!("{}{MOTION_SUFFIX}", kind.name()),
+                        truth,
+                        failure,
+                    ));
+                }
+            }
             (runs, detail)
         })
         .collect();
@@ -286,6 +318,54 @@ pub(super) fn run(
         outcome.detail = outcome.detail.or(detail);
     }
     Ok(outcome)
+}
+
+/// The name suffix of a method fitted with the motion as inputs.
+pub const MOTION_SUFFIX: &str = " + motion";
+
+/// `data` (clock-corrected samples) with the motion as extra inputs: per joint, the torque the commanded motion
+/// at each sample's corrected time needs beyond gravity, `tau_motion_<joint>` (Nm), from the nominal model's
+/// inverse dynamics with the declared payload — what the controller can compute from its own commands.
+pub fn with_motion_inputs(
+    data: &Dataset,
+    path: &trajectory::Path,
+    offset_s: f64,
+    world: &crate::world::World,
+    ctx: &FitContext,
+) -> Dataset {
+    let chain = &world.nominal;
+    let mut frames = Frames::new(chain);
+    let mut ws = Workspace::new(chain);
+    let mut tau = vec![0.0; chain.dof()];
+    let times = data.time.as_deref().unwrap_or_default();
+    let values = times
+        .iter()
+        .map(|t| {
+            let at = path.at(t + offset_s);
+            forward_kinematics(chain, &at.q, &mut frames);
+            inverse_dynamics(
+                chain,
+                &frames,
+                &ctx.payload,
+                &Vector3::zeros(),
+                &at.qd,
+                &at.qdd,
+                &mut ws,
+                &mut tau,
+            );
+            tau.clone()
+        })
+        .collect();
+    let mut moving = data.clone();
+    moving.extra_inputs = Some(ExtraInputs {
+        names: chain
+            .joints
+            .iter()
+            .map(|j| format!("tau_motion_{}", j.name))
+            .collect(),
+        values,
+    });
+    moving
 }
 
 /// The detail method's error at every sample of `measured` (`data`: the same samples, clock-corrected).
