@@ -7,7 +7,9 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::campaign::Campaign;
-use crate::dataset::{Dataset, FLANGE_COLUMNS, TEMPERATURE_COLUMN, TIME_COLUMN};
+use crate::dataset::{
+    ACCELERATION_PREFIX, Dataset, FLANGE_COLUMNS, TEMPERATURE_COLUMN, TIME_COLUMN, VELOCITY_PREFIX,
+};
 use crate::error::{Error, Result};
 
 fn xyz_columns(prefix: &str, count: usize) -> Vec<String> {
@@ -66,6 +68,13 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
     if time {
         header.push(TIME_COLUMN.into());
     }
+    let rates = campaign.points.iter().any(|p| p.rates.is_some());
+    if rates {
+        for prefix in [VELOCITY_PREFIX, ACCELERATION_PREFIX] {
+            header.extend(campaign.joint_names.iter().map(|j| format!("{prefix}{j}")));
+        }
+    }
+    let dof = campaign.joint_names.len();
     let rows = campaign.points.iter().map(move |p| {
         let mut row = vec![p.id.to_string(), p.region.clone()];
         row.extend(p.q_cmd.iter().map(|q| q.to_string()));
@@ -77,6 +86,12 @@ pub fn measurements_csv(campaign: &Campaign) -> Result<Vec<u8>> {
         }
         if time {
             row.push(p.time.map_or(String::new(), |t| t.to_string()));
+        }
+        if rates {
+            match &p.rates {
+                Some(r) => row.extend(r.qd.iter().chain(&r.qdd).map(|v| v.to_string())),
+                None => row.extend(std::iter::repeat_n(String::new(), 2 * dof)),
+            }
         }
         row
     });

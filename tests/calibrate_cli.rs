@@ -953,6 +953,39 @@ fn a_campaign_measured_on_the_fly_is_synchronised_by_calibrate() {
     );
     assert!((offset - 0.003).abs() <= 50e-6, "{offset} s");
 
+    // The commanded rates the controller logged make the motion inputs of a regression; a prediction without
+    // them is at rest. Data without them is refused on one line.
+    assert!(csv.header.iter().any(|h| h == "qdd_iiwa_joint_7"));
+    let moving = dir.path().join("fit_motion");
+    fit_ok(
+        &measurements,
+        &moving,
+        &["--method", "paper-rotxyz", "--motion-inputs"],
+    );
+    let report = json(&moving.join("report.json"));
+    let inputs: Vec<&str> = report["extra_inputs"]
+        .as_array()
+        .expect("report.json lists the extra inputs")
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    assert_eq!(inputs.len(), 7, "{inputs:?}");
+    assert!(
+        inputs
+            .iter()
+            .all(|n| n.starts_with("tau_motion_iiwa_joint_"))
+    );
+    let stop_and_go = campaign(&dir, "at_rest", at_rest);
+    let no_rates = dir.path().join("fit_no_rates");
+    let output = calibrate(&[
+        "--data".as_ref(),
+        stop_and_go.join("measurements.csv").as_os_str(),
+        "--out".as_ref(),
+        no_rates.as_os_str(),
+        "--motion-inputs".as_ref(),
+    ]);
+    assert_clean_failure(&output, &no_rates, &["qd_<joint>", "measurements.csv"]);
+
     let refused = dir.path().join("refused.toml");
     std::fs::write(&refused, format!("{text}{trajectory}")).unwrap();
     let bad_out = dir.path().join("refused_out");

@@ -49,6 +49,7 @@ pub fn options(data: &Path, method: MethodKind, out: PathBuf) -> FitOptions {
         test_data: None,
         test_mapping: None,
         test_registration: TestRegistration::Refit,
+        motion_inputs: false,
         ignore_inputs: false,
         robot: "robots/iiwa7.urdf".into(),
         flange_link: None,

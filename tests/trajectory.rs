@@ -182,10 +182,10 @@ fn a_known_clock_offset_is_recovered() {
 /// where the motion deflects the arm most.
 #[test]
 fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
+    use calibench::calib::motion_inputs::with_motion_inputs;
     use calibench::calib::registry::{self, MethodKind};
     use calibench::eval::Stats;
     use calibench::eval::accuracy::{GroundTruth, fit_context, truth_errors, truth_errors_with};
-    use calibench::study::trajectory::with_motion_inputs;
 
     let s = scenario(60);
     let sim = calibench::app::simulate(&s).unwrap();
@@ -196,7 +196,7 @@ fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
         trajectory::measure(world, &sim.campaign, &s.campaign.posture_rad(), &full, 11).unwrap();
     let data = as_dataset(&measured.campaign, "trajectory").unwrap();
     let ctx = fit_context(world);
-    let moving = with_motion_inputs(&data, &measured.path, 0.0, world, &ctx);
+    let moving = with_motion_inputs(&data, &world.nominal, &ctx.payload).unwrap();
     let inputs = &moving.extra_inputs.as_ref().unwrap().values;
     // The path starts at rest: no motion torque there.
     assert!(inputs[0].iter().all(|t| t.abs() < 1e-9), "{:?}", inputs[0]);

@@ -11,6 +11,7 @@ use serde_json::{Map, Value};
 
 use crate::calib::clock::{self, ClockOffset};
 use crate::calib::method::{FitContext, Fitted};
+use crate::calib::motion_inputs::with_motion_inputs;
 use crate::calib::registry::{self, MethodKind, Save, SavedModel};
 use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Registration;
@@ -40,6 +41,9 @@ pub struct FitOptions {
     pub test_registration: TestRegistration,
     /// Drop the data's extra inputs so no method regresses on them.
     pub ignore_inputs: bool,
+    /// Give the methods that regress on extra inputs the motion as inputs (`calib::motion_inputs`; the data
+    /// needs the commanded joint rates, `qd_*` and `qdd_*`).
+    pub motion_inputs: bool,
     pub robot: PathBuf,
     /// The link carrying the reflectors; the chain's last link when absent.
     pub flange_link: Option<String>,
@@ -197,6 +201,13 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         let found = clock::estimate(&dh, &data, CLOCK_BOUND_S)
             .map_err(|e| e.in_data(&data.origin, "estimating the clock offset"))?;
         Ok((clock::corrected(&data, found.offset_s)?, Some(found)))
+    };
+    let synchronised = |data: Dataset| -> Result<(Dataset, Option<ClockOffset>)> {
+        let (data, offset) = synchronised(data)?;
+        if !options.motion_inputs {
+            return Ok((data, offset));
+        }
+        Ok((with_motion_inputs(&data, &chain, &options.payload)?, offset))
     };
     let (data, clock_offset) = synchronised(read(&options.data, mapping.as_ref())?)?;
     let test_file = match &options.test_data {

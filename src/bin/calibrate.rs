@@ -64,6 +64,11 @@ struct FitArgs {
     /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
     #[arg(long)]
     ignore_inputs: bool,
+    /// Give the methods that regress on extra inputs the motion as inputs: per joint, the torque the commanded
+    /// motion needs beyond gravity (data measured on the fly with `qd_<joint>` and `qdd_<joint>` columns). A
+    /// prediction without them is at rest.
+    #[arg(long)]
+    motion_inputs: bool,
     /// The robot: a URDF, or a DH description (.toml, see robots/README.md); its joint names name the joint
     /// columns. `robots/iiwa7.urdf`, `robots/ur10.urdf`, `robots/ur5.urdf` and `robots/ur5.toml` are built in:
     /// they work from any directory.
@@ -187,6 +192,7 @@ fn fit_options(args: FitArgs) -> Result<FitOptions> {
         test_mapping: args.test_mapping,
         test_registration,
         ignore_inputs: args.ignore_inputs,
+        motion_inputs: args.motion_inputs,
         robot: args.robot,
         flange_link: args.flange_link,
         method,

@@ -24,7 +24,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3xX, Point3, Vector3};
 
 use super::rigid::centre;
 use super::tracker_frame::fit_tracker_frame;
-use crate::dataset::Dataset;
+use crate::dataset::{Dataset, JointRates};
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
 
@@ -86,6 +86,11 @@ impl<'a> Timeline<'a> {
     /// Joint readings of every row at its time + `shift`, in row order: the quadratic through the row and its
     /// two neighbours in time (the two nearest at either end).
     fn shifted(&self, shift: f64) -> Vec<Vec<f64>> {
+        self.shifted_rows(&self.data.q, shift)
+    }
+
+    /// Any per-row vectors (`rows`, in row order) re-evaluated the same way.
+    fn shifted_rows(&self, rows: &[Vec<f64>], shift: f64) -> Vec<Vec<f64>> {
         let n = self.order.len();
         let mut out = vec![Vec::new(); n];
         for (k, &row) in self.order.iter().enumerate() {
@@ -98,7 +103,7 @@ impl<'a> Timeline<'a> {
                 (t - ts[0]) * (t - ts[2]) / ((ts[1] - ts[0]) * (ts[1] - ts[2])),
                 (t - ts[0]) * (t - ts[1]) / ((ts[2] - ts[0]) * (ts[2] - ts[1])),
             ];
-            let q = &self.data.q;
+            let q = rows;
             out[row] = (0..q[row].len())
                 .map(|j| w[0] * q[idx[0]][j] + w[1] * q[idx[1]][j] + w[2] * q[idx[2]][j])
                 .collect();
@@ -270,9 +275,26 @@ pub fn estimate(dh: &DhChain, data: &Dataset, bound_s: f64) -> Result<ClockOffse
 /// `data` with each row's joint readings re-evaluated at its time + `offset_s`: what the arm's controller read
 /// when the tracker measured it.
 pub fn corrected(data: &Dataset, offset_s: f64) -> Result<Dataset> {
-    let q = Timeline::of(data)?.shifted(offset_s);
+    let timeline = Timeline::of(data)?;
+    let q = timeline.shifted(offset_s);
     let mut out = data.clone();
     out.q = q;
+    // The commanded rates logged with the readings move with them.
+    if let Some(rates) = &data.rates {
+        let pick = |f: fn(&JointRates) -> &Vec<f64>| -> Vec<Vec<f64>> {
+            timeline.shifted_rows(
+                &rates.iter().map(|r| f(r).clone()).collect::<Vec<_>>(),
+                offset_s,
+            )
+        };
+        let (qd, qdd) = (pick(|r| &r.qd), pick(|r| &r.qdd));
+        out.rates = Some(
+            qd.into_iter()
+                .zip(qdd)
+                .map(|(qd, qdd)| JointRates { qd, qdd })
+                .collect(),
+        );
+    }
     // The nominal columns were computed from the uncorrected readings; they are not the methods' inputs.
     out.nominal_flange = None;
     Ok(out)

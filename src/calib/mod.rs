@@ -36,6 +36,7 @@ pub mod domain;
 pub mod error_model;
 pub mod kinematic;
 pub mod method;
+pub mod motion_inputs;
 pub mod paper;
 pub mod registry;
 pub mod regression;

@@ -223,14 +223,8 @@ impl PaperModel {
                 val.extra_input_names().join(", ")
             )));
         }
-        let extra_input_means = (0..extra_inputs.len())
-            .map(|k| {
-                (0..train.len())
-                    .map(|i| train.extra_inputs_of(i)[k])
-                    .sum::<f64>()
-                    / train.len() as f64
-            })
-            .collect();
+        // Training means, and zero for the motion (the arm at rest): what a prediction takes unless told.
+        let extra_input_means = train.input_defaults();
         let mut model = PaperModel {
             method: info_of(kind),
             kind,

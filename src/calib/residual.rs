@@ -35,7 +35,7 @@ use super::rigid::centre;
 use super::tracker_frame::{
     Observation, Registration, fit_mounting, fit_tracker_frame, probe_rotation,
 };
-use crate::dataset::Dataset;
+use crate::dataset::{Dataset, MOTION_INPUT_PREFIX};
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
 use crate::robot::plausible;
@@ -196,8 +196,15 @@ impl ResidualCorrection {
                 extra_inputs.join(", ")
             )));
         }
+        // Training means, and zero for the motion (the arm at rest): what a prediction takes unless told.
         let input_means: Vec<f64> = (0..extra)
-            .map(|k| train.iter().map(|o| o.inputs[k]).sum::<f64>() / train.len().max(1) as f64)
+            .map(|k| {
+                if extra_inputs[k].starts_with(MOTION_INPUT_PREFIX) {
+                    0.0
+                } else {
+                    train.iter().map(|o| o.inputs[k]).sum::<f64>() / train.len().max(1) as f64
+                }
+            })
             .collect();
         let refs_train: Vec<Reference> = train.iter().map(|o| reference(&o.q)).collect();
         let refs_val: Vec<Reference> = val.iter().map(|o| reference(&o.q)).collect();

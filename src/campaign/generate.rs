@@ -14,6 +14,7 @@ use super::region::{CampaignConfig, RegionConfig};
 use super::sequence::Stop;
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
+use crate::robot::JointRates;
 use crate::robot::collision::CollisionModel;
 use crate::robot::ik::{IkError, IkOptions, IkSolver};
 use crate::robot::kinematics::{Frames, forward_kinematics};
@@ -72,6 +73,8 @@ pub struct CampaignPoint {
     pub temperature: Option<f64>,
     /// The tracker's time stamp of a sample measured on the fly (s; [`super::trajectory`]); `None` stop and go.
     pub time: Option<f64>,
+    /// The controller's commanded joint velocities and accelerations logged with a sample measured on the fly.
+    pub rates: Option<JointRates>,
 }
 
 /// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a

@@ -116,6 +116,7 @@ impl Generator<'_> {
                         q_true: work.state.q.clone(),
                         temperature: history.temperature,
                         time: None,
+                        rates: None,
                     }
                 },
             )

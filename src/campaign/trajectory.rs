@@ -23,7 +23,7 @@ use super::generate::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
-use crate::robot::{Frames, forward_kinematics};
+use crate::robot::{Frames, JointRates, forward_kinematics};
 use crate::truth::PathPoint;
 use crate::world::World;
 
@@ -322,7 +322,10 @@ pub fn measure(
             lost_line_of_sight += 1;
             continue;
         }
-        let logged = path.at(*s).q;
+        // The controller logs its commanded angles, velocities and accelerations at its own stamp.
+        let PathPoint {
+            q: logged, qd, qdd, ..
+        } = path.at(*s);
         forward_kinematics(&world.nominal, &logged, &mut frames);
         let nominal_flange = frames.flange;
         let measured = true_reflectors
@@ -351,6 +354,7 @@ pub fn measure(
             q_true: m.q.clone(),
             temperature: None,
             time: Some(*s),
+            rates: Some(JointRates { qd, qdd }),
         });
         dynamic_m.push(m.dynamic_m);
     }

@@ -639,6 +639,7 @@ impl ColumnMapping {
                 values: inputs,
             }),
             time: None,
+            rates: None,
             base_frame: self.position.frame == PositionFrame::Base,
         })
     }

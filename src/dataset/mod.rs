@@ -45,6 +45,17 @@ pub const TEMPERATURE_COLUMN: &str = "temperature";
 /// The time column (s, the tracker's clock) of a campaign measured on the fly.
 pub const TIME_COLUMN: &str = "time";
 
+/// Column prefixes of the controller's commanded joint velocities (`qd_<joint>`, rad/s) and accelerations
+/// (`qdd_<joint>`, rad/s²) logged with each sample of a campaign measured on the fly.
+pub const VELOCITY_PREFIX: &str = "qd_";
+pub const ACCELERATION_PREFIX: &str = "qdd_";
+
+/// Name prefix of the motion inputs (`tau_motion_<joint>`, Nm; [`crate::calib::motion_inputs`]): an input whose
+/// value at rest is zero, which a model takes when not told otherwise.
+pub const MOTION_INPUT_PREFIX: &str = "tau_motion_";
+
+pub use crate::robot::JointRates;
+
 /// The points of a measurement campaign, as a calibration method may see them.
 #[derive(Clone, Debug)]
 pub struct Dataset {
@@ -71,6 +82,8 @@ pub struct Dataset {
     pub extra_inputs: Option<ExtraInputs>,
     /// The tracker's time stamp of each sample (s), for a campaign measured on the fly (`time` column).
     pub time: Option<Vec<f64>>,
+    /// The commanded joint velocities and accelerations of each sample (`qd_*`, `qdd_*` columns).
+    pub rates: Option<Vec<JointRates>>,
     /// The measurements are already in the robot's base frame (a mapping's `[position] frame = "base"`): no
     /// tracker frame is fitted, only the mounting.
     pub base_frame: bool,
@@ -125,6 +138,7 @@ impl Dataset {
         let region_col = table.column("region");
         let temperature_col = table.column(TEMPERATURE_COLUMN);
         let time_col = table.column(TIME_COLUMN);
+        let rate_cols = table.rate_columns(joint_names)?;
 
         let n = table.rows.len();
         let point_ids = table.point_ids()?;
@@ -136,7 +150,14 @@ impl Dataset {
         let mut regions = region_col.map(|_| Vec::with_capacity(n));
         let mut temperature = temperature_col.map(|_| Vec::with_capacity(n));
         let mut time = time_col.map(|_| Vec::with_capacity(n));
+        let mut rates = rate_cols.as_ref().map(|_| Vec::with_capacity(n));
         for r in 0..n {
+            if let (Some(out), Some((qd, qdd))) = (&mut rates, &rate_cols) {
+                out.push(JointRates {
+                    qd: table.numbers(r, qd)?,
+                    qdd: table.numbers(r, qdd)?,
+                });
+            }
             if let (Some(out), Some(c)) = (&mut time, time_col) {
                 out.push(table.number(r, c)?);
             }
@@ -174,6 +195,7 @@ impl Dataset {
                 values,
             }),
             time,
+            rates,
             base_frame: false,
         })
     }
@@ -199,6 +221,7 @@ impl Dataset {
             measured_orientation: None,
             extra_inputs: None,
             time: None,
+            rates: None,
             base_frame: false,
         }
     }
@@ -240,6 +263,7 @@ impl Dataset {
                 values: pick(&x.values, indices),
             }),
             time: self.time.as_deref().map(|v| pick(v, indices)),
+            rates: self.rates.as_deref().map(|v| pick(v, indices)),
             base_frame: self.base_frame,
         }
     }
@@ -249,6 +273,25 @@ impl Dataset {
         self.extra_inputs
             .as_ref()
             .map_or(&[], |x| x.names.as_slice())
+    }
+
+    /// The value each extra input takes when a model is not given it: its mean over the rows, except a motion
+    /// input ([`MOTION_INPUT_PREFIX`]), which is zero — the arm at rest, as it is used after calibration.
+    pub fn input_defaults(&self) -> Vec<f64> {
+        let Some(x) = &self.extra_inputs else {
+            return Vec::new();
+        };
+        x.names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                if name.starts_with(MOTION_INPUT_PREFIX) || x.values.is_empty() {
+                    0.0
+                } else {
+                    x.values.iter().map(|v| v[k]).sum::<f64>() / x.values.len() as f64
+                }
+            })
+            .collect()
     }
 
     /// The extra inputs of point `i` (empty without any).
@@ -297,6 +340,28 @@ impl Table {
                 })
             })
             .collect()
+    }
+
+    /// The `qd_<joint>` and `qdd_<joint>` columns of every joint, `None` when the file has none of them; a
+    /// file with some but not all is refused, naming the first one missing.
+    fn rate_columns(&self, joint_names: &[String]) -> Result<Option<(Vec<usize>, Vec<usize>)>> {
+        let names: Vec<String> = [VELOCITY_PREFIX, ACCELERATION_PREFIX]
+            .iter()
+            .flat_map(|p| joint_names.iter().map(move |j| format!("{p}{j}")))
+            .collect();
+        let found: Vec<Option<usize>> = names.iter().map(|n| self.column(n)).collect();
+        if found.iter().all(Option::is_none) {
+            return Ok(None);
+        }
+        if let Some(k) = found.iter().position(Option::is_none) {
+            return Err(self.error(format!(
+                "no column '{}': commanded joint rates need qd_<joint> and qdd_<joint> for every joint",
+                names[k]
+            )));
+        }
+        let cols: Vec<usize> = found.into_iter().flatten().collect();
+        let n = joint_names.len();
+        Ok(Some((cols[..n].to_vec(), cols[n..].to_vec())))
     }
 
     /// `x, y, z, qw, qx, qy, qz`. A quaternion within 1e-9 of unit norm is kept as written (so a file

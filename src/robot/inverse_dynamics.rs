@@ -49,6 +49,14 @@ fn point_accel(
     a + alpha.cross(r) + omega.cross(&omega.cross(r))
 }
 
+/// Joint velocities (rad/s) and accelerations (rad/s²), in the chain's joint order: what the controller commands
+/// with the angles at a sample of a path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointRates {
+    pub qd: Vec<f64>,
+    pub qdd: Vec<f64>,
+}
+
 /// Joint torques (Nm; N for a prismatic joint) that move the chain, in the configuration of `frames` (a
 /// forward-kinematics pass at `q`), with joint velocities `qd` and accelerations `qdd`, carrying `payload` at
 /// the flange, under `gravity` (world frame). Fills `out`.

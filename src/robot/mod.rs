@@ -15,4 +15,5 @@ pub mod urdf;
 
 pub use chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Payload, Shape};
 pub use description::load;
+pub use inverse_dynamics::JointRates;
 pub use kinematics::{Frames, flange_pose, forward_kinematics, point_jacobian};

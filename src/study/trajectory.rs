@@ -9,7 +9,7 @@
 //! static ground-truth grid — the arm used point to point afterwards. A trajectory costs its duration; a
 //! stop-and-go campaign `move_s + settle_s + measure_s` per point ([`super::StudyConfig`]).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -18,18 +18,17 @@ use super::StudyConfig;
 use super::measure::{Measure, campaign_seed, layout_index};
 use crate::calib::clock;
 use crate::calib::method::{FitContext, Fitted};
+use crate::calib::motion_inputs::with_motion_inputs;
 use crate::calib::registry::{self, MethodKind};
 use crate::campaign::DistributionKind;
 use crate::campaign::generate::TruePoint;
 use crate::campaign::trajectory::{self, TrajectoryCampaign, TrajectoryConfig};
-use crate::dataset::{Dataset, ExtraInputs};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::Stats;
 use crate::eval::accuracy::{GroundTruth, truth_errors, truth_errors_with};
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
-use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
-use crate::robot::{Frames, forward_kinematics};
 
 /// `[study.trajectory]`: trajectory campaigns beside the stop-and-go ones. Magnitudes and their sources in
 /// `scenarios/README.md`.
@@ -280,7 +279,10 @@ pub(super) fn run(
                 })
                 .collect();
             if study.motion_inputs {
-                let moving = with_motion_inputs(&data, &measured.path, offset, world, ctx);
+                let moving = match with_motion_inputs(&data, &world.nominal, &ctx.payload) {
+                    Ok(m) => m,
+                    Err(e) => return failed(e.detail()),
+                };
                 let (train, val) = (moving.subset(&train_rows), moving.subset(&val_rows));
                 let at_rest = vec![0.0; world.nominal.dof()];
                 for &kind in kinds.iter().filter(|k| k.info().takes_inputs) {
@@ -322,51 +324,6 @@ pub(super) fn run(
 
 /// The name suffix of a method fitted with the motion as inputs.
 pub const MOTION_SUFFIX: &str = " + motion";
-
-/// `data` (clock-corrected samples) with the motion as extra inputs: per joint, the torque the commanded motion
-/// at each sample's corrected time needs beyond gravity, `tau_motion_<joint>` (Nm), from the nominal model's
-/// inverse dynamics with the declared payload — what the controller can compute from its own commands.
-pub fn with_motion_inputs(
-    data: &Dataset,
-    path: &trajectory::Path,
-    offset_s: f64,
-    world: &crate::world::World,
-    ctx: &FitContext,
-) -> Dataset {
-    let chain = &world.nominal;
-    let mut frames = Frames::new(chain);
-    let mut ws = Workspace::new(chain);
-    let mut tau = vec![0.0; chain.dof()];
-    let times = data.time.as_deref().unwrap_or_default();
-    let values = times
-        .iter()
-        .map(|t| {
-            let at = path.at(t + offset_s);
-            forward_kinematics(chain, &at.q, &mut frames);
-            inverse_dynamics(
-                chain,
-                &frames,
-                &ctx.payload,
-                &Vector3::zeros(),
-                &at.qd,
-                &at.qdd,
-                &mut ws,
-                &mut tau,
-            );
-            tau.clone()
-        })
-        .collect();
-    let mut moving = data.clone();
-    moving.extra_inputs = Some(ExtraInputs {
-        names: chain
-            .joints
-            .iter()
-            .map(|j| format!("tau_motion_{}", j.name))
-            .collect(),
-        values,
-    });
-    moving
-}
 
 /// The detail method's error at every sample of `measured` (`data`: the same samples, clock-corrected).
 fn sampled(
