@@ -228,3 +228,41 @@ fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
         "{with_mm} mm with, {plain_mm} mm without"
     );
 }
+
+/// Between the targets the tracker loses the reflector where it turns out of its acceptance cone: those samples
+/// are missing and counted, every sample kept faces the tracker, and kept + lost are all the samples. A narrow
+/// cone (the targets are still checked against it when planned) makes the path leave it.
+#[test]
+fn samples_outside_the_acceptance_cone_are_lost() {
+    let text = std::fs::read_to_string("scenarios/paper_iiwa.toml").unwrap();
+    let narrow = text.replacen("points = 2335", "points = 30", 1).replacen(
+        "acceptance_half_angle_deg = 30.0",
+        "acceptance_half_angle_deg = 17.0",
+        1,
+    );
+    let s = Scenario::parse(&narrow, "paper_iiwa (narrow cone)").unwrap();
+    let sim = calibench::app::simulate(&s).unwrap();
+    let world = &sim.world;
+    let cfg = config(0.0);
+    let measured =
+        trajectory::measure(world, &sim.campaign, &s.campaign.posture_rad(), &cfg, 3).unwrap();
+    let kept = measured.campaign.points.len();
+    let total = (measured.duration_s * cfg.sample_rate_hz).floor() as usize / cfg.keep_every + 1;
+    eprintln!(
+        "{kept} samples kept of {total}: {} lost outside the cone, {} to a blocked beam",
+        measured.lost_acceptance_cone, measured.lost_line_of_sight
+    );
+    assert!(measured.lost_acceptance_cone > 0);
+    assert_eq!(
+        kept + measured.lost_acceptance_cone + measured.lost_line_of_sight,
+        total
+    );
+    for p in &measured.campaign.points {
+        let facing = p.true_flange.rotation * world.mounting.facing;
+        assert!(
+            world
+                .tracker
+                .in_acceptance_cone(&p.true_reflectors[0], &facing)
+        );
+    }
+}
