@@ -236,8 +236,6 @@ impl Path {
 /// A campaign measured on the fly, with what it cost and what the motion did.
 pub struct TrajectoryCampaign {
     pub campaign: Campaign,
-    /// The commanded path: what the controller knows of the motion (its commanded velocities and accelerations).
-    pub path: Path,
     /// The path's duration: the tracker time the campaign takes (s).
     pub duration_s: f64,
     /// Per kept sample, the flange displacement due to the motion (m).
@@ -366,7 +364,6 @@ pub fn measure(
         )));
     }
     Ok(TrajectoryCampaign {
-        path,
         campaign: Campaign {
             joint_names: planned.joint_names.clone(),
             points,
