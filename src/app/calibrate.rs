@@ -356,7 +356,11 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     let truth_errors = match &truth {
         Some(t) => {
             let t_test = t.subset(&parts.test_indices);
-            let obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
+            let mut obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
+            // Each point with its own inputs (its temperature, its motion), as the measured test split has them.
+            for (i, o) in obs_truth.iter_mut().enumerate() {
+                o.inputs = test.extra_inputs_of(i).to_vec();
+            }
             let mut e = BeforeAfter::of(model, &obs_truth);
             if nominal.is_some() {
                 let nominal_truth = nominal_model
