@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Point3};
+use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -75,6 +76,58 @@ pub struct CampaignPoint {
     pub time: Option<f64>,
     /// The controller's commanded joint velocities and accelerations logged with a sample measured on the fly.
     pub rates: Option<JointRates>,
+}
+
+/// Where a point was commanded and where the true arm really was: what [`CampaignPoint::measured`] needs.
+pub struct Visited {
+    pub id: usize,
+    pub region: String,
+    /// The logged joint angles and the flange pose the nominal model gives them.
+    pub q_cmd: Vec<f64>,
+    pub nominal_flange: Isometry3<f64>,
+    /// The true arm's flange pose and link-side joint angles.
+    pub true_flange: Isometry3<f64>,
+    pub q_true: Vec<f64>,
+}
+
+impl CampaignPoint {
+    /// The point `visited` as the tracker measures it in `world`, its noise drawn from `rng` (one draw per
+    /// reflector, in order). Temperature, time and rates are `None`, for the caller to set.
+    pub fn measured(world: &World, visited: Visited, rng: &mut ChaCha8Rng) -> CampaignPoint {
+        let true_reflectors: Vec<Point3<f64>> = world
+            .mounting
+            .actual
+            .iter()
+            .map(|p| visited.true_flange * p)
+            .collect();
+        let measured = true_reflectors
+            .iter()
+            .map(|p| world.tracker.measure(p, rng))
+            .collect();
+        CampaignPoint {
+            id: visited.id,
+            region: visited.region,
+            q_cmd: visited.q_cmd,
+            nominal_flange: visited.nominal_flange,
+            nominal_reflectors: world
+                .mounting
+                .nominal
+                .iter()
+                .map(|p| visited.nominal_flange * p)
+                .collect(),
+            measured,
+            true_flange: visited.true_flange,
+            true_in_tracker: true_reflectors
+                .iter()
+                .map(|p| world.tracker.pose.inverse_transform_point(p))
+                .collect(),
+            true_reflectors,
+            q_true: visited.q_true,
+            temperature: None,
+            time: None,
+            rates: None,
+        }
+    }
 }
 
 /// A point of a noise-free ground-truth set ([`Generator::ground_truth`]): where the true arm really is for a

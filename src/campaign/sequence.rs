@@ -4,10 +4,9 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::Point3;
 use rayon::prelude::*;
 
-use super::generate::{Campaign, CampaignPoint, Generator, Rejections, Unloaded};
+use super::generate::{Campaign, CampaignPoint, Generator, Rejections, Unloaded, Visited};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::Chain;
@@ -81,42 +80,18 @@ impl Generator<'_> {
                     // check of a planned point draws in, so the check saw the pose measured here.
                     robot.reach_with_angles(&settled, scale, Some(&mut rng), &mut work.state);
                     let true_flange = work.state.frames.flange;
-                    let true_reflectors: Vec<Point3<f64>> = self
-                        .world
-                        .mounting
-                        .actual
-                        .iter()
-                        .map(|p| true_flange * p)
-                        .collect();
-                    let measured = true_reflectors
-                        .iter()
-                        .map(|p| self.world.tracker.measure(p, &mut rng))
-                        .collect();
                     forward_kinematics(&self.world.nominal, &stop.q_cmd, &mut work.frames);
-                    let nominal_flange = work.frames.flange;
-                    CampaignPoint {
+                    let visited = Visited {
                         id: k,
                         region: stop.region.clone(),
                         q_cmd: stop.q_cmd.clone(),
-                        nominal_flange,
-                        nominal_reflectors: self
-                            .world
-                            .mounting
-                            .nominal
-                            .iter()
-                            .map(|p| nominal_flange * p)
-                            .collect(),
-                        measured,
+                        nominal_flange: work.frames.flange,
                         true_flange,
-                        true_in_tracker: true_reflectors
-                            .iter()
-                            .map(|p| self.world.tracker.pose.inverse_transform_point(p))
-                            .collect(),
-                        true_reflectors,
                         q_true: work.state.q.clone(),
+                    };
+                    CampaignPoint {
                         temperature: history.temperature,
-                        time: None,
-                        rates: None,
+                        ..CampaignPoint::measured(self.world, visited, &mut rng)
                     }
                 },
             )

@@ -19,7 +19,7 @@ use nalgebra::Point3;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::generate::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint};
+use super::generate::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint, Visited};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
@@ -325,34 +325,19 @@ pub fn measure(
             q: logged, qd, qdd, ..
         } = path.at(*s);
         forward_kinematics(&world.nominal, &logged, &mut frames);
-        let nominal_flange = frames.flange;
-        let measured = true_reflectors
-            .iter()
-            .map(|p| world.tracker.measure(p, &mut rng))
-            .collect();
-        points.push(CampaignPoint {
+        let visited = Visited {
             id: k,
             // A sample belongs to the region of the target the arm is heading for.
             region: planned.points[path.segment(*s)].region.clone(),
             q_cmd: logged,
-            nominal_flange,
-            nominal_reflectors: world
-                .mounting
-                .nominal
-                .iter()
-                .map(|p| nominal_flange * p)
-                .collect(),
-            measured,
+            nominal_flange: frames.flange,
             true_flange: m.flange,
-            true_in_tracker: true_reflectors
-                .iter()
-                .map(|p| world.tracker.pose.inverse_transform_point(p))
-                .collect(),
-            true_reflectors,
             q_true: m.q.clone(),
-            temperature: None,
+        };
+        points.push(CampaignPoint {
             time: Some(*s),
             rates: Some(JointRates { qd, qdd }),
+            ..CampaignPoint::measured(world, visited, &mut rng)
         });
         dynamic_m.push(m.dynamic_m);
     }
