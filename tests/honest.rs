@@ -220,7 +220,7 @@ fn a_refit_on_few_test_points_is_reported_beside_the_model_registration_and_warn
 /// Data already in the robot's base frame (`[position] frame = "base"`): no tracker frame is fitted — the
 /// registration is the identity in every method — and a calibration, which then identifies the base's own
 /// errors, removes most of what `nominal` leaves. (It does not reach its tracker-frame result on the same
-/// points: 0.208 against 0.134 mm for `kinematic`; the README says why we think so.)
+/// points: 0.190 against 0.134 mm for `kinematic`; the README says why.)
 #[test]
 fn base_frame_data_fits_only_the_mounting() {
     let dir = TempDir::new().unwrap();
