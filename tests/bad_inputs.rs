@@ -330,6 +330,16 @@ fn cases(f: &Fixture) -> Vec<Case> {
             s(&["row 2", "column y1", "not finite"]),
         ),
         (
+            "commanded joint rates for one joint only",
+            f.data_with("rates.csv", |t| {
+                t.header.push("qd_iiwa_joint_1".into());
+                for r in &mut t.rows {
+                    r.push("0.1".into());
+                }
+            }),
+            s(&["no column 'qd_iiwa_joint_2'", "qdd_<joint>"]),
+        ),
+        (
             "a short row",
             f.data_with("short.csv", |t| {
                 t.rows[6].pop();
