@@ -306,6 +306,14 @@ fn learning_panel(
     if !floor.is_empty() {
         entries.push(("floor (oracle)".into(), BLACK, 2, true));
     }
+    draw_legend(&legend, entries)
+}
+
+/// A legend in its own area: per entry (label, colour, line width, dashed) a swatch drawn as its line is.
+fn draw_legend(
+    legend: &DrawingArea<BitMapBackend, Shift>,
+    entries: Vec<(String, RGBColor, u32, bool)>,
+) -> Drawn {
     for (k, (label, col, width, dash)) in entries.into_iter().enumerate() {
         let y = 70 + 28 * k as i32;
         for segment in line(&[(8, y), (44, y)], col.stroke_width(width), dash) {
@@ -448,6 +456,9 @@ fn histogram_panel(
     Ok(())
 }
 
+/// Width of the tracker-time plot's legend column (px): the longest label is a hybrid's `+ motion`.
+const TRACKER_LEGEND_WIDTH: u32 = 330;
+
 /// A method's colour index, name and (tracker minutes, mean mm) points.
 type MethodLine<'a> = (usize, &'a str, Vec<(f64, f64)>);
 
@@ -468,9 +479,12 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
         sizes.sort_unstable();
         sizes.dedup();
         let name = format!("plots/tracker_time_{}.png", file_safe(region));
-        let (pw, ph) = (1045u32, 680u32);
+        let (pw, ph) = (1200u32, 680u32);
         let png = render(&name, (pw * sizes.len() as u32, ph), |root| {
-            for (panel, &n) in root.split_evenly((1, sizes.len())).iter().zip(&sizes) {
+            for (whole, &n) in root.split_evenly((1, sizes.len())).iter().zip(&sizes) {
+                // The legend in a column of its own, right of the plot, so it hides no line.
+                let (panel, legend) = whole.split_horizontally(pw - TRACKER_LEGEND_WIDTH);
+                let panel = &panel;
                 let lines: Vec<MethodLine> = rows
                     .iter()
                     .filter(|r| r.region == region && r.n_targets == n)
@@ -517,32 +531,25 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                     .axis_desc_style((FAMILY, 19))
                     .light_line_style(RGBColor(235, 235, 235))
                     .draw()?;
+                let mut entries = Vec::new();
                 for (i, method, pts) in &lines {
                     let c = colour(*i);
                     // Fitted with the motion as inputs: dashed, in its method's colour.
                     let dash = method.ends_with(crate::study::trajectory::MOTION_SUFFIX);
-                    let drawn = if dash {
+                    if dash {
                         chart.draw_series(DashedLineSeries::new(
                             pts.clone(),
                             10,
                             6,
                             c.stroke_width(2),
-                        ))?
+                        ))?;
                     } else {
-                        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-                    };
-                    drawn.label(*method).legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                    });
+                        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
+                    }
                     chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
+                    entries.push((method.to_string(), c, 2, dash));
                 }
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::LowerLeft)
-                    .label_font((FAMILY, 15))
-                    .background_style(WHITE.mix(0.8))
-                    .border_style(RGBColor(200, 200, 200))
-                    .draw()?;
+                draw_legend(&legend, entries)?;
             }
             Ok(())
         })?;
