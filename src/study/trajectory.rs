@@ -26,7 +26,7 @@ use crate::campaign::trajectory::{self, TrajectoryCampaign, TrajectoryConfig};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::Stats;
-use crate::eval::accuracy::{GroundTruth, truth_errors, truth_errors_with};
+use crate::eval::accuracy::{GroundTruth, truth_errors};
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
 
@@ -284,18 +284,13 @@ pub(super) fn run(
                     Err(e) => return failed(e.detail()),
                 };
                 let (train, val) = (moving.subset(&train_rows), moving.subset(&val_rows));
-                let at_rest = vec![0.0; world.nominal.dof()];
                 for &kind in kinds.iter().filter(|k| k.info().takes_inputs) {
                     let (truth, failure) = match registry::fit(kind, ctx, &train, &val) {
                         Ok(model) => (
                             Stats::of(
-                                &truth_errors_with(
-                                    model.as_ref(),
-                                    truth[r],
-                                    &truth[r].grid.points,
-                                    &at_rest,
-                                )
-                                .position,
+                                // At the inputs' defaults: the motion's are zero, the arm at rest.
+                                &truth_errors(model.as_ref(), truth[r], &truth[r].grid.points)
+                                    .position,
                             ),
                             None,
                         ),
