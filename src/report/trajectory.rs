@@ -7,6 +7,7 @@
 
 use std::fmt::Write;
 
+use super::aggregate::spread;
 use super::metrics::mm;
 use crate::campaign::DistributionKind;
 use crate::error::{Error, Result};
@@ -71,17 +72,9 @@ pub fn trajectory_csv(study: &StudyResult) -> Result<Option<Vec<u8>>> {
         .map_err(|e| Error::Invalid(format!("trajectory.csv: {e}")))
 }
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
+/// The median of `v` (the study's quantiles, [`spread`]); `None` when empty.
+fn median(v: Vec<f64>) -> Option<f64> {
+    spread(&v).map(|s| s.median)
 }
 
 fn cell(v: Option<f64>) -> String {
