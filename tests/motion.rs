@@ -1,22 +1,132 @@
-//! The arm in motion (issue 16): the fast quasi-static path (`TrueRobot::follow`) against the rapier multibody
-//! driven along the same path (`PhysicsReference::follow`), which integrates the compliant joints' full
-//! dynamics.
+//! The arm in motion (issue 16): the fast path (`TrueRobot::follow`: quasi-static deflection plus the linearised
+//! joint vibration about it) against two integrations of the compliant, damped joints' full nonlinear dynamics:
+//! the rapier multibody driven along the same path (`PhysicsReference::follow`) and an f64 Runge–Kutta written
+//! here.
 
 use calibench::campaign::trajectory::Path;
+use calibench::robot::Frames;
+use calibench::robot::inverse_dynamics::{Workspace, inverse_dynamics};
 use calibench::scenario::Scenario;
 use calibench::truth::physics::SettleOptions;
 use calibench::truth::robot::Deflection;
-use calibench::truth::{PathPoint, TrueState};
+use calibench::truth::{PathPoint, TrueRobot, TrueState};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 use crate::common::IDEAL_ELASTIC;
 
-/// Along a 2-waypoint move of every joint at half the limits, the flange of the fast path and of rapier: their
-/// largest distance (m) and the largest dynamic deflection (m) the fast path computes.
-fn compare(speed: f64) -> (f64, f64) {
+/// Rapier's steps (s): its backward Euler is first order in the step, so the two runs are extrapolated to a zero
+/// step (Richardson). Smaller steps do not help: rapier works in f32, and below 0.1 ms a step's position increment
+/// at the slow velocities of a joint ringing down falls under the angle's rounding (1e-7 rad), so its answer
+/// drifts again (measured: 0.05 and 0.025 ms land 20–80 µm from both the coarser runs and the f64 integration).
+const RAPIER_DT: [f64; 2] = [2e-4, 1e-4];
+
+/// The step of the independent f64 integration (s): classic Runge–Kutta, 0.13 rad per step at the fastest
+/// joint mode (the wrist's, ~2600 rad/s).
+const RK4_DT: f64 = 5e-5;
+
+struct Comparison {
+    /// Largest flange distance between the fast path and the f64 integration of the full model (m).
+    against_f64: f64,
+    /// Largest flange distance between the fast path and rapier (extrapolated), while the arm moves (m).
+    against_rapier: f64,
+    /// Largest flange distance between rapier's finer run and its extrapolation, while the arm moves (m): the
+    /// error of rapier's best run, as its own two runs estimate it.
+    rapier_error: f64,
+    /// Largest flange displacement due to the motion, as the fast path computes it (m).
+    dynamic: f64,
+    /// Largest flange distance between the motion's quasi-static part alone and the f64 integration (m).
+    quasi_static: f64,
+}
+
+/// The full flexible-joint model `M(q) q̈ + h(q, q̇) = K (θ − q) + D (θ̇ − q̇)` integrated in f64 by classic
+/// Runge–Kutta from the static equilibrium at `times[0]`, with the library's inverse dynamics for M and h (checked
+/// on its own in `robot::inverse_dynamics`): the joint angles at `times`.
+fn integrate_f64(
+    robot: &TrueRobot,
+    rest_at: &dyn Fn(f64) -> Vec<f64>,
+    times: &[f64],
+) -> Vec<Vec<f64>> {
+    let n = robot.chain.dof();
+    let (k, d) = (&robot.perturbation.stiffness, robot.transmission_damping());
+    let mut frames = Frames::new(&robot.chain);
+    let mut ws = Workspace::new(&robot.chain);
+    let zero = vec![0.0; n];
+    let mut accel = |t: f64, q: &[f64], v: &[f64]| -> Vec<f64> {
+        let h = 1e-6;
+        let (theta, ahead, behind) = (rest_at(t), rest_at(t + h), rest_at(t - h));
+        robot.kinematics(q, &[], 1.0, &mut frames);
+        let mut bias = vec![0.0; n];
+        let g = robot.gravity;
+        inverse_dynamics(
+            &robot.chain,
+            &frames,
+            &robot.payload,
+            &g,
+            v,
+            &zero,
+            &mut ws,
+            &mut bias,
+        );
+        let mut m = DMatrix::zeros(n, n);
+        let mut column = vec![0.0; n];
+        for j in 0..n {
+            let mut unit = zero.clone();
+            unit[j] = 1.0;
+            let none = Vector3::zeros();
+            inverse_dynamics(
+                &robot.chain,
+                &frames,
+                &robot.payload,
+                &none,
+                &zero,
+                &unit,
+                &mut ws,
+                &mut column,
+            );
+            m.set_column(j, &DVector::from_column_slice(&column));
+        }
+        let force = DVector::from_fn(n, |i, _| {
+            let rate = (ahead[i] - behind[i]) / (2.0 * h);
+            k[i] * (theta[i] - q[i]) + d[i] * (rate - v[i]) - bias[i]
+        });
+        m.lu().solve(&force).unwrap().as_slice().to_vec()
+    };
+    let mut state = TrueState::new(robot);
+    state.q0 = rest_at(times[0]);
+    robot.deflect(&mut state).unwrap();
+    let (mut q, mut v, mut t) = (state.q.clone(), zero.clone(), times[0]);
+    let axpy = |x: &[f64], y: &[f64], s: f64| -> Vec<f64> {
+        x.iter().zip(y).map(|(a, b)| a + s * b).collect()
+    };
+    let mut out = Vec::with_capacity(times.len());
+    for &target in times {
+        while t + 0.5 * RK4_DT < target {
+            let h = RK4_DT;
+            let a1 = accel(t, &q, &v);
+            let (q2, v2) = (axpy(&q, &v, h / 2.0), axpy(&v, &a1, h / 2.0));
+            let a2 = accel(t + h / 2.0, &q2, &v2);
+            let (q3, v3) = (axpy(&q, &v2, h / 2.0), axpy(&v, &a2, h / 2.0));
+            let a3 = accel(t + h / 2.0, &q3, &v3);
+            let (q4, v4) = (axpy(&q, &v3, h), axpy(&v, &a3, h));
+            let a4 = accel(t + h, &q4, &v4);
+            for i in 0..n {
+                q[i] += h / 6.0 * (v[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]);
+                v[i] += h / 6.0 * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]);
+            }
+            t += h;
+        }
+        out.push(q.clone());
+    }
+    out
+}
+
+/// Along a 3-waypoint move of every joint at `speed` × the limits (acceleration 5 rad/s², the default study's),
+/// sampled at 100 Hz through 0.3 s of ringing down after it, the fast path against the references.
+fn compare(speed: f64) -> Comparison {
     let s = Scenario::parse(IDEAL_ELASTIC, "ideal_elastic.toml").unwrap();
     let world = calibench::app::world(&s).unwrap();
-    let robot = &world.robot;
     let start = s.campaign.posture_rad();
+    let robot = &world.robot;
     let via: Vec<f64> = start
         .iter()
         .enumerate()
@@ -27,50 +137,82 @@ fn compare(speed: f64) -> (f64, f64) {
     let path = Path::plan(&[start, via, end], &vmax, 5.0, speed).unwrap();
     let times: Vec<f64> = (0..)
         .map(|k| k as f64 * 0.01)
-        .take_while(|t| *t <= path.duration())
+        .take_while(|t| *t <= path.duration() + 0.3)
         .collect();
-    let points: Vec<PathPoint> = times.iter().map(|&t| path.at(t)).collect();
-    let fast = robot.follow(&points, None).unwrap();
+    let at = |t: f64| path.at(t);
+    let fast = robot.follow(&at, &times, None).unwrap();
     let n = world.nominal.dof();
     let rest_at = |t: f64| {
         let mut q0 = vec![0.0; n];
         robot.unloaded_angles(&path.at(t).q, &mut q0);
         q0
     };
-    let mut physics = robot.physics_reference(SettleOptions::default()).unwrap();
-    let settled = physics.follow(&rest_at, &times, 2e-4).unwrap();
     let mut state = TrueState::new(robot);
-    let (mut worst, mut dynamic) = (0.0f64, 0.0f64);
-    for (f, q) in fast.iter().zip(settled) {
-        robot.reach_with_angles(
-            &Deflection {
-                q,
-                tilt: Vec::new(),
-            },
-            1.0,
-            None,
-            &mut state,
-        );
-        let d = (f.flange.translation.vector - state.frames.flange.translation.vector).norm();
-        worst = worst.max(d);
-        dynamic = dynamic.max(f.dynamic_m);
+    let mut flange = |q: Vec<f64>| {
+        let tilt = Vec::new();
+        robot.reach_with_angles(&Deflection { q, tilt }, 1.0, None, &mut state);
+        state.frames.flange.translation.vector
+    };
+    let reference: Vec<_> = integrate_f64(robot, &rest_at, &times)
+        .into_iter()
+        .map(&mut flange)
+        .collect();
+    let damping = robot.transmission_damping();
+    let [coarse, fine] = RAPIER_DT.map(|dt| {
+        let mut physics = robot.physics_reference(SettleOptions::default()).unwrap();
+        let q = physics.follow(&rest_at, &damping, &times, dt).unwrap();
+        q.into_iter().map(&mut flange).collect::<Vec<_>>()
+    });
+    let mut quasi = TrueState::new(robot);
+    let mut c = Comparison {
+        against_f64: 0.0,
+        against_rapier: 0.0,
+        rapier_error: 0.0,
+        dynamic: 0.0,
+        quasi_static: 0.0,
+    };
+    for (k, (f, &t)) in fast.iter().zip(&times).enumerate() {
+        let x = f.flange.translation.vector;
+        c.against_f64 = c.against_f64.max((x - reference[k]).norm());
+        if t <= path.duration() {
+            let rapier = 2.0 * fine[k] - coarse[k];
+            c.against_rapier = c.against_rapier.max((x - rapier).norm());
+            c.rapier_error = c.rapier_error.max((fine[k] - rapier).norm());
+        }
+        c.dynamic = c.dynamic.max(f.dynamic_m);
+        let PathPoint { q, qd, qdd, .. } = path.at(t);
+        robot.unloaded_angles(&q, &mut quasi.q0);
+        robot.deflect_moving(&mut quasi, Some((&qd, &qdd))).unwrap();
+        let missed = (quasi.frames.flange.translation.vector - reference[k]).norm();
+        c.quasi_static = c.quasi_static.max(missed);
     }
-    (worst, dynamic)
+    c
 }
 
 #[test]
-fn the_fast_path_against_rapier_in_motion() {
-    let (worst, dynamic) = compare(0.5);
+fn the_fast_path_agrees_with_the_full_dynamics_in_motion() {
+    let c = compare(1.0);
     eprintln!(
-        "half speed: fast path against rapier {:.2} µm at most; dynamic deflection up to {:.1} µm",
-        worst * 1e6,
-        dynamic * 1e6
+        "full speed: fast path against the f64 integration {:.2} µm at most, against rapier (extrapolated) \
+         {:.1} µm while the arm moves (rapier's finer run is {:.1} µm from it); the quasi-static part alone misses by {:.1} µm, the dynamic deflection is \
+         up to {:.1} µm",
+        c.against_f64 * 1e6,
+        c.against_rapier * 1e6,
+        c.rapier_error * 1e6,
+        c.quasi_static * 1e6,
+        c.dynamic * 1e6
     );
-    // Issue 16 asks ≤ 5 µm; the quasi-static fast path misses the compliant joints' ringing and lag, measured
-    // at 128 µm here (105 µm with rapier at 0.05 ms: converged), against a dynamic deflection of 506 µm. What
-    // it must do is capture most of the motion's load; the README reports the gap.
+    // Issue 16 asks 5 µm against rapier along a path at the default speed. Met against the f64 integration of the
+    // same equations; rapier itself, in f32, is not that accurate (see RAPIER_DT): the fast path must sit closer
+    // to rapier's extrapolated answer than rapier's own finer run does. The motion must matter for any of this to mean something: the dynamic deflection and
+    // what the quasi-static part misses are far above both bounds.
+    assert!(c.against_f64 <= 5e-6, "{} µm", c.against_f64 * 1e6);
     assert!(
-        dynamic > 0.0 && worst < 0.5 * dynamic,
-        "{worst} m against a dynamic part of {dynamic} m"
+        c.against_rapier < c.rapier_error,
+        "{} µm against rapier's own {} µm",
+        c.against_rapier * 1e6,
+        c.rapier_error * 1e6
     );
+    assert!(c.dynamic > 500e-6, "{} µm", c.dynamic * 1e6);
+    assert!(c.quasi_static > 100e-6, "{} µm", c.quasi_static * 1e6);
 }

@@ -6,7 +6,7 @@ use calibench::campaign::trajectory::{self, Path, TrajectoryConfig};
 use calibench::measurements::as_dataset;
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;
-use calibench::truth::{PathPoint, TrueState, Visit};
+use calibench::truth::{TrueState, Visit};
 
 /// paper_iiwa with `points` targets.
 fn scenario(points: usize) -> Scenario {
@@ -29,12 +29,12 @@ fn config(offset: f64) -> TrajectoryConfig {
     }
 }
 
-/// A path that stops at every target (zero velocity and acceleration there, each joint having just moved
-/// toward it): at the stops the arm in motion is the arm at rest, bit for bit, with the same lost motion and
-/// thermal state as the static campaign's sequence gives it.
+/// A path that stops at every target and dwells there (each joint having just moved toward it, rest to rest):
+/// at the stops, once the joints' vibration has died down, the arm in motion is the arm at rest to far below
+/// the tracker's noise, with the same lost motion and thermal state as the static campaign's sequence gives it.
 #[test]
 fn at_the_stops_the_moving_arm_is_the_static_arm() {
-    let s = scenario(30);
+    let s = scenario(12);
     let sim = calibench::app::simulate(&s).unwrap();
     let robot = &sim.world.robot;
     let posture = s.campaign.posture_rad();
@@ -51,35 +51,41 @@ fn at_the_stops_the_moving_arm_is_the_static_arm() {
         .perturbation
         .thermal
         .as_ref()
-        .map_or(1.0, |t| t.seconds_per_point);
-    let mut path = Vec::new();
+        .map_or(5.0, |t| t.seconds_per_point);
+    let vmax: Vec<f64> = sim
+        .world
+        .nominal
+        .joints
+        .iter()
+        .map(|j| j.velocity)
+        .collect();
+    // Leg k moves from the previous stop to stop k in the first part of ((k − 1)·every, k·every], then dwells.
     let mut previous = posture.clone();
-    for (k, q) in commands.iter().enumerate() {
-        // On the way, each joint moving toward the stop; then the stop itself, at rest.
-        let qd: Vec<f64> = q.iter().zip(&previous).map(|(a, b)| a - b).collect();
-        let mid: Vec<f64> = q
-            .iter()
-            .zip(&previous)
-            .map(|(a, b)| 0.5 * (a + b))
-            .collect();
-        let t = k as f64 * every;
-        path.push(PathPoint {
-            t: t - 0.5 * every,
-            q: mid,
-            qd,
-            qdd: vec![0.0; q.len()],
-        });
-        path.push(PathPoint {
-            t,
-            q: q.to_vec(),
-            qd: vec![0.0; q.len()],
-            qdd: vec![0.0; q.len()],
-        });
-        previous = q.to_vec();
-    }
-    let moved = robot.follow(&path, None).unwrap();
+    let legs: Vec<Path> = commands
+        .iter()
+        .map(|q| {
+            let leg = Path::plan(&[previous.clone(), q.to_vec()], &vmax, 5.0, 1.0).unwrap();
+            assert!(leg.duration() < 0.6 * every, "{} s", leg.duration());
+            previous = q.to_vec();
+            leg
+        })
+        .collect();
+    let at = |t: f64| {
+        let k = ((t / every).ceil().max(0.0) as usize).min(legs.len() - 1);
+        let mut p = legs[k].at(t - (k as f64 - 1.0) * every);
+        p.t = t;
+        p
+    };
+    // The stops, and a sample in the middle of every move.
+    let times: Vec<f64> = (0..commands.len())
+        .flat_map(|k| {
+            let stop = k as f64 * every;
+            [stop - every + 0.5 * legs[k].duration(), stop]
+        })
+        .collect();
+    let moved = robot.follow(&at, &times, None).unwrap();
     let mut state = TrueState::new(robot);
-    let mut moving = 0.0f64;
+    let (mut moving, mut worst) = (0.0f64, 0.0f64);
     for (k, (q, visit)) in commands.iter().zip(&visits).enumerate() {
         let visit = Visit {
             direction: visit.direction.clone(),
@@ -87,12 +93,15 @@ fn at_the_stops_the_moving_arm_is_the_static_arm() {
         };
         robot.reach_after(q, &visit, None, &mut state).unwrap();
         let stop = &moved[2 * k + 1];
-        assert_eq!(stop.dynamic_m, 0.0);
-        assert_eq!(stop.flange, state.frames.flange, "stop {k}");
+        assert!(stop.dynamic_m < 1e-8, "stop {k}: {} m", stop.dynamic_m);
+        worst = worst
+            .max((stop.flange.translation.vector - state.frames.flange.translation.vector).norm());
         moving = moving.max(moved[2 * k].dynamic_m);
     }
-    // On the way the arm is loaded by its motion: the dynamic part is not zero.
-    assert!(moving > 0.0);
+    // The tracker's noise is micrometres; the stops agree to a thousandth of one.
+    assert!(worst < 1e-9, "{worst} m");
+    // On the way the arm is loaded by its motion: the dynamic part is not small.
+    assert!(moving > 10e-6, "{moving} m");
 }
 
 /// The planned path passes through every waypoint and keeps every joint within speed × its limits.

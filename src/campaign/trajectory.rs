@@ -287,11 +287,13 @@ pub fn measure(
         .map_err(|e| Error::Invalid(format!("trajectory.jitter_s: {e}")))?;
     // The tracker stamps sample k at k·dt by its clock; the arm was there at controller time k·dt + offset.
     let stamps: Vec<f64> = kept.iter().map(|&k| k as f64 * dt).collect();
-    let truth_path: Vec<PathPoint> = stamps
+    let truth_times: Vec<f64> = stamps
         .iter()
-        .map(|&s| path.at(s + config.clock_offset_s + jitter.sample(&mut rng)))
+        .map(|&s| s + config.clock_offset_s + jitter.sample(&mut rng))
         .collect();
-    let moved = world.robot.follow(&truth_path, Some(&mut rng))?;
+    let moved = world
+        .robot
+        .follow(&|t| path.at(t), &truth_times, Some(&mut rng))?;
     let mut frames = Frames::new(&world.nominal);
     let collision = CollisionModel::new(&world.nominal);
     let origin = world.tracker.origin();

@@ -1,23 +1,51 @@
 //! The true arm in motion: following a commanded joint-space path, sampled at the tracker's instants.
 //!
-//! At each sample the arm is where the static path would put it (zero offsets, gear error, lost motion by the
-//! direction each joint is moving in, thermal growth by the time since the start) but its compliant joints carry
-//! the full inverse-dynamics torque of the true links — the torque that accelerates them besides the one that
-//! holds them against gravity ([`TrueRobot::deflect_moving`]). That is quasi-static: the deflection follows the
-//! load at once, without the transmission's own vibration, which for a joint of stiffness k carrying inertia J
-//! rings at √(k/J) (tens of hertz for the iiwa) and is damped within a few periods — a rapier multibody reference
-//! of that transient is not built yet (issue 16).
+//! The motor side of each joint follows the command; the link side hangs on the transmission, a spring of the
+//! joint's stiffness K with a viscous damper D across it (Spong's flexible-joint model). With θ the unloaded
+//! angles (command, zero offset, gear error, lost motion by the direction each joint moves in) and `z = θ − q`
+//! the joints' deflection, the true links obey
+//!
+//! ```text
+//! M(q) q̈ + h(q, q̇) = K z + D ż
+//! ```
+//!
+//! The fast path splits that into what the static path already solves and a small linear remainder. The
+//! quasi-static deflection δ_s carries the full inverse-dynamics torque of the motion at the commanded rates
+//! ([`TrueRobot::deflect_moving`], nonlinear springs, tilt and thermal growth included). Linearised about it,
+//! the deflection obeys
+//!
+//! ```text
+//! M z̈ + (D + B) ż + (K_t + A) z = (K_t + A) δ_s(t)
+//! ```
+//!
+//! (A = ∂τ/∂q, B = ∂τ/∂q̇ of the inverse dynamics τ, K_t the springs' slope): a mass–spring–damper driven by
+//! the quasi-static deflection, so that a still arm settles exactly where the static path puts it and a moving
+//! one lags and rings about it. That system is integrated by the trapezoidal rule (Newmark's average
+//! acceleration: no numerical damping, second order) at steps of at most [`MOTION_STEP_S`], with M, A and B
+//! refreshed every [`RELINEARIZE_S`] of path. The rapier multibody ([`super::physics`], `follow`) integrates the
+//! full nonlinear model; `tests/motion.rs` holds the two together.
 //!
 //! The controller logs its motor encoders: the motor angle it reads back is the command it tracked, so a servo
 //! lag between command and motor does not enter a (logged angles, measured point) pair; the clock offset between
 //! the controller's log and the tracker's does, and is the tracker's concern ([`crate::tracker::motion`]).
 
-use nalgebra::Isometry3;
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 use rand_chacha::ChaCha8Rng;
 
 use super::history::Visit;
-use super::robot::{TrueRobot, TrueState};
-use crate::error::Result;
+use super::robot::{Deflection, TrueRobot, TrueState};
+use crate::error::{Error, Result};
+use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
+use crate::robot::{Frames, Payload};
+
+/// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (10–15 Hz for
+/// the iiwa) are then resolved to 0.1 % in frequency by the trapezoidal rule; faster modes (the wrist, up to
+/// ~150 Hz) are barely excited by a smooth path and stay near their quasi-static answer.
+pub const MOTION_STEP_S: f64 = 1e-3;
+
+/// How long the mass matrix and the torque's sensitivities are kept (s of path): they change with the posture,
+/// a few per cent over this at full speed, and only the small dynamic remainder depends on them.
+pub const RELINEARIZE_S: f64 = 0.02;
 
 /// One commanded sample of a joint-space path: time (s), angles (rad), velocities (rad/s), accelerations
 /// (rad/s²), controller coordinates.
@@ -42,53 +70,328 @@ pub struct MotionSample {
     pub dynamic_m: f64,
 }
 
+/// The linearised joint dynamics about the quasi-static state: `M z̈ + C ż + S z = S δ_s`.
+struct Linear {
+    m: DMatrix<f64>,
+    c: DMatrix<f64>,
+    s: DMatrix<f64>,
+}
+
+/// The deflection's state in the trapezoidal integration: `z`, `ż`, `z̈`, the quasi-static deflection it is
+/// driven by, at the last node.
+struct Remainder {
+    t: f64,
+    z: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    quasi_static: DVector<f64>,
+    linear: Linear,
+    linearized_at: f64,
+}
+
+/// The settled arm at a sample, before repeatability noise.
+struct Reached {
+    settled: Deflection,
+    scale: f64,
+    dynamic_m: f64,
+}
+
 impl TrueRobot {
-    /// The arm following `path`, one [`MotionSample`] per point. A joint at rest keeps the direction it last
-    /// moved in (lost motion); repeatability noise is drawn from `noise` when given.
+    /// The arm following the commanded `path` (a function of controller time), sampled at `times` (s, any
+    /// order): one [`MotionSample`] per time. It starts at the earliest time in its quasi-static state (at rest
+    /// for a path that starts at rest). A joint at rest keeps the direction it last moved in (lost motion);
+    /// repeatability noise is drawn from `noise`, sample by sample in the order of `times`, when given.
     pub fn follow(
         &self,
-        path: &[PathPoint],
+        path: &dyn Fn(f64) -> PathPoint,
+        times: &[f64],
+        noise: Option<&mut ChaCha8Rng>,
+    ) -> Result<Vec<MotionSample>> {
+        self.follow_stepped(path, times, MOTION_STEP_S, noise)
+    }
+
+    /// [`TrueRobot::follow`] with the integration's longest step `step_s` (s).
+    pub fn follow_stepped(
+        &self,
+        path: &dyn Fn(f64) -> PathPoint,
+        times: &[f64],
+        step_s: f64,
         mut noise: Option<&mut ChaCha8Rng>,
     ) -> Result<Vec<MotionSample>> {
-        let mut state = TrueState::new(self);
-        let mut still = TrueState::new(self);
-        let mut direction = vec![1.0; self.chain.dof()];
-        let mut out = Vec::with_capacity(path.len());
-        for p in path {
-            for (d, v) in direction.iter_mut().zip(&p.qd) {
-                if *v != 0.0 {
-                    *d = v.signum();
+        if !(step_s.is_finite() && step_s > 0.0) {
+            return Err(Error::Invalid(format!(
+                "motion: integration step {step_s} s must be positive"
+            )));
+        }
+        if let Some(t) = times.iter().find(|t| !t.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "motion: sample time {t} s is not a finite number"
+            )));
+        }
+        let n = self.chain.dof();
+        let mut order: Vec<usize> = (0..times.len()).collect();
+        order.sort_by(|&a, &b| times[a].total_cmp(&times[b]));
+        let damping = self.transmission_damping();
+        let mut walk = Walk {
+            robot: self,
+            path,
+            damping: &damping,
+            state: TrueState::new(self),
+            still: TrueState::new(self),
+            direction: vec![1.0; n],
+            remainder: None,
+            ws: Workspace::new(&self.chain),
+            frames: Frames::new(&self.chain),
+        };
+        let mut reached: Vec<Option<Reached>> = (0..times.len()).map(|_| None).collect();
+        let mut last: Option<f64> = None;
+        for &i in &order {
+            let target = times[i];
+            if let Some(previous) = last {
+                // Nodes between samples further apart than a step, evenly spaced.
+                let gap = target - previous;
+                let steps = (gap / step_s).ceil() as usize;
+                for k in 1..steps {
+                    walk.advance(previous + gap * k as f64 / steps as f64)?;
                 }
             }
-            let visit = Visit {
-                direction: direction.clone(),
-                temperature: self
-                    .perturbation
-                    .thermal
-                    .as_ref()
-                    .map(|t| t.temperature_at(p.t)),
-            };
-            self.unloaded_angles_after(&p.q, &visit, &mut state.q0);
-            state.scale = self.length_scale(&visit);
-            let moving = p.qd.iter().chain(&p.qdd).any(|v| *v != 0.0);
-            self.deflect_moving(&mut state, moving.then_some((&p.qd[..], &p.qdd[..])))?;
-            let dynamic_m = if moving {
-                still.q0.copy_from_slice(&state.q0);
-                still.scale = state.scale;
-                self.deflect(&mut still)?;
-                (state.frames.flange.translation.vector - still.frames.flange.translation.vector)
-                    .norm()
-            } else {
-                0.0
-            };
-            self.add_noise(noise.as_deref_mut(), &mut state);
-            out.push(MotionSample {
-                t: p.t,
-                q: state.q.clone(),
-                flange: state.frames.flange,
-                dynamic_m,
-            });
+            walk.advance(target)?;
+            reached[i] = Some(walk.reached()?);
+            last = Some(target);
         }
-        Ok(out)
+        let mut state = TrueState::new(self);
+        reached
+            .into_iter()
+            .zip(times)
+            .map(|(r, &t)| {
+                let r =
+                    r.ok_or_else(|| Error::Invalid("motion: a sample was not reached".into()))?;
+                self.reach_with_angles(&r.settled, r.scale, noise.as_deref_mut(), &mut state);
+                Ok(MotionSample {
+                    t,
+                    q: state.q.clone(),
+                    flange: state.frames.flange,
+                    dynamic_m: r.dynamic_m,
+                })
+            })
+            .collect()
+    }
+
+    /// M, C = D + B and S = K_t + A at the quasi-static state of `state` (frames at its angles, `tau` the load
+    /// torque) moving at (`qd`, `qdd`).
+    #[allow(clippy::too_many_arguments)]
+    fn linearize(
+        &self,
+        state: &TrueState,
+        qd: &[f64],
+        qdd: &[f64],
+        damping: &[f64],
+        ws: &mut Workspace,
+        frames: &mut Frames,
+    ) -> Linear {
+        let n = self.chain.dof();
+        let torque = |frames: &Frames,
+                      gravity: &Vector3<f64>,
+                      qd: &[f64],
+                      qdd: &[f64],
+                      ws: &mut Workspace,
+                      payload: &Payload| {
+            let mut out = vec![0.0; n];
+            inverse_dynamics(&self.chain, frames, payload, gravity, qd, qdd, ws, &mut out);
+            DVector::from_vec(out)
+        };
+        let zero = vec![0.0; n];
+        let mut m = DMatrix::zeros(n, n);
+        let mut c = DMatrix::zeros(n, n);
+        let mut s = DMatrix::zeros(n, n);
+        for j in 0..n {
+            let mut unit = zero.clone();
+            unit[j] = 1.0;
+            m.set_column(
+                j,
+                &torque(
+                    &state.frames,
+                    &Vector3::zeros(),
+                    &zero,
+                    &unit,
+                    ws,
+                    &self.payload,
+                ),
+            );
+            // τ is quadratic in q̇: a central difference is exact whatever its width.
+            let (mut up, mut down) = (qd.to_vec(), qd.to_vec());
+            up[j] += 1.0;
+            down[j] -= 1.0;
+            let plus = torque(&state.frames, &self.gravity, &up, qdd, ws, &self.payload);
+            let minus = torque(&state.frames, &self.gravity, &down, qdd, ws, &self.payload);
+            c.set_column(j, &((plus - minus) * 0.5));
+            const H: f64 = 1e-6;
+            let mut q = state.q.clone();
+            q[j] += H;
+            self.kinematics(&q, &state.tilt, state.scale, frames);
+            let plus = torque(frames, &self.gravity, qd, qdd, ws, &self.payload);
+            q[j] -= 2.0 * H;
+            self.kinematics(&q, &state.tilt, state.scale, frames);
+            let minus = torque(frames, &self.gravity, qd, qdd, ws, &self.payload);
+            s.set_column(j, &((plus - minus) / (2.0 * H)));
+        }
+        for i in 0..n {
+            c[(i, i)] += damping[i];
+            s[(i, i)] += self.tangent_stiffness(i, state.tau()[i]);
+        }
+        Linear { m, c, s }
+    }
+}
+
+/// The walk along the path, node by node in time order.
+struct Walk<'a> {
+    robot: &'a TrueRobot,
+    path: &'a dyn Fn(f64) -> PathPoint,
+    damping: &'a [f64],
+    /// The quasi-static solve at the current node.
+    state: TrueState,
+    /// The static solve at the same command (for the dynamic part's size).
+    still: TrueState,
+    direction: Vec<f64>,
+    remainder: Option<Remainder>,
+    ws: Workspace,
+    frames: Frames,
+}
+
+impl Walk<'_> {
+    /// Moves to time `t`: the quasi-static solve there, then one trapezoidal step of the deflection.
+    fn advance(&mut self, t: f64) -> Result<()> {
+        let robot = self.robot;
+        let p = (self.path)(t);
+        let n = robot.chain.dof();
+        if p.q.len() != n || p.qd.len() != n || p.qdd.len() != n {
+            return Err(Error::Invalid(format!(
+                "motion: the path gives {} angles at t = {t} s, the robot has {n} joints",
+                p.q.len()
+            )));
+        }
+        for (d, v) in self.direction.iter_mut().zip(&p.qd) {
+            if *v != 0.0 {
+                *d = v.signum();
+            }
+        }
+        let visit = Visit {
+            direction: self.direction.clone(),
+            temperature: robot
+                .perturbation
+                .thermal
+                .as_ref()
+                .map(|th| th.temperature_at(t)),
+        };
+        let state = &mut self.state;
+        robot.unloaded_angles_after(&p.q, &visit, &mut state.q0);
+        state.scale = robot.length_scale(&visit);
+        robot.deflect_moving(state, Some((&p.qd[..], &p.qdd[..])))?;
+        let quasi_static =
+            DVector::from_iterator(n, state.q0.iter().zip(&state.q).map(|(q0, q)| q0 - q));
+        let stale = self
+            .remainder
+            .as_ref()
+            .is_none_or(|r| t - r.linearized_at >= RELINEARIZE_S);
+        let linear = stale.then(|| {
+            robot.linearize(
+                state,
+                &p.qd,
+                &p.qdd,
+                self.damping,
+                &mut self.ws,
+                &mut self.frames,
+            )
+        });
+        match (&mut self.remainder, linear) {
+            (None, linear) => {
+                let linear = linear.expect("a first node is always linearised");
+                self.remainder = Some(Remainder {
+                    t,
+                    z: quasi_static.clone(),
+                    v: DVector::zeros(n),
+                    a: DVector::zeros(n),
+                    quasi_static,
+                    linear,
+                    linearized_at: t,
+                });
+            }
+            (Some(r), linear) => {
+                if let Some(linear) = linear {
+                    // The acceleration at the last node, consistent with the new matrices.
+                    let force = &linear.s * (&r.quasi_static - &r.z) - &linear.c * &r.v;
+                    r.a = linear
+                        .m
+                        .clone()
+                        .lu()
+                        .solve(&force)
+                        .ok_or_else(|| singular(t))?;
+                    r.linear = linear;
+                    r.linearized_at = t;
+                }
+                r.step(t, quasi_static)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The arm at the current node: the link angles `θ − z` with the quasi-static tilt, and how far the motion
+    /// moved the flange from the arm standing still at the same command.
+    fn reached(&mut self) -> Result<Reached> {
+        let robot = self.robot;
+        let r = self
+            .remainder
+            .as_ref()
+            .ok_or_else(|| Error::Invalid("motion: no node reached yet".into()))?;
+        let state = &self.state;
+        let q: Vec<f64> = state
+            .q0
+            .iter()
+            .zip(r.z.iter())
+            .map(|(q0, z)| q0 - z)
+            .collect();
+        robot.kinematics(&q, &state.tilt, state.scale, &mut self.frames);
+        let still = &mut self.still;
+        still.q0.copy_from_slice(&state.q0);
+        still.scale = state.scale;
+        robot.deflect(still)?;
+        let dynamic_m =
+            (self.frames.flange.translation.vector - still.frames.flange.translation.vector).norm();
+        Ok(Reached {
+            settled: Deflection {
+                q,
+                tilt: state.tilt.clone(),
+            },
+            scale: state.scale,
+            dynamic_m,
+        })
+    }
+}
+
+fn singular(t: f64) -> Error {
+    Error::Physics(format!(
+        "motion: the arm's mass matrix is singular at t = {t} s (a link without mass or inertia?)"
+    ))
+}
+
+impl Remainder {
+    /// One trapezoidal (Newmark average-acceleration) step to time `t`, driven by `quasi_static` there.
+    fn step(&mut self, t: f64, quasi_static: DVector<f64>) -> Result<()> {
+        let h = t - self.t;
+        if h > 0.0 {
+            let Linear { m, c, s } = &self.linear;
+            let (a0, a1) = (4.0 / (h * h), 2.0 / h);
+            let effective = s + c * a1 + m * a0;
+            let rhs = s * &quasi_static
+                + m * (&self.z * a0 + &self.v * (4.0 / h) + &self.a)
+                + c * (&self.z * a1 + &self.v);
+            let z = effective.lu().solve(&rhs).ok_or_else(|| singular(t))?;
+            let v = (&z - &self.z) * a1 - &self.v;
+            let a = (&z - &self.z) * a0 - &self.v * (4.0 / h) - &self.a;
+            (self.z, self.v, self.a) = (z, v, a);
+            self.t = t;
+        }
+        self.quasi_static = quasi_static;
+        Ok(())
     }
 }

@@ -89,6 +89,25 @@ pub struct ErrorModel {
     /// Thermal growth of the links over the campaign (a warm-up); none by default.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thermal: Option<ThermalProfile>,
+    /// Damping of each joint's vibration about its transmission, as a fraction of critical damping for the
+    /// inertia the joint carries at the campaign posture: only an arm in motion feels it.
+    #[serde(
+        default = "default_damping_ratio",
+        skip_serializing_if = "is_default_damping_ratio"
+    )]
+    pub damping_ratio: f64,
+}
+
+/// The joints' damping ratio when a scenario gives none; its source is in `scenarios/README.md`
+/// (`truth.damping_ratio`).
+pub const DEFAULT_DAMPING_RATIO: f64 = 0.1;
+
+fn default_damping_ratio() -> f64 {
+    DEFAULT_DAMPING_RATIO
+}
+
+fn is_default_damping_ratio(v: &f64) -> bool {
+    *v == DEFAULT_DAMPING_RATIO
 }
 
 impl ErrorModel {
@@ -116,6 +135,7 @@ impl ErrorModel {
             soft_zone_stiffness_ratio: unit_ratio(),
             tilt_stiffness_nm_per_rad: Vec::new(),
             thermal: None,
+            damping_ratio: DEFAULT_DAMPING_RATIO,
         }
     }
 
@@ -142,6 +162,13 @@ impl ErrorModel {
                     "truth.{name} = {v} must be finite and non-negative"
                 ));
             }
+        }
+        // Undamped joints would ring for ever after every move; above 2 the joints barely move back.
+        if !(self.damping_ratio > 0.0 && self.damping_ratio <= 2.0) {
+            return bad(format!(
+                "truth.damping_ratio = {} must be in (0, 2] (a fraction of critical damping)",
+                self.damping_ratio
+            ));
         }
         if self.stiffness_nm_per_rad.len() != dof {
             return bad(format!(
@@ -295,6 +322,12 @@ pub struct Perturbation {
     pub tilt_stiffness: Vec<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thermal: Option<ThermalProfile>,
+    /// Damping of the joints' vibration, a fraction of critical ([`ErrorModel::damping_ratio`]).
+    #[serde(
+        default = "default_damping_ratio",
+        skip_serializing_if = "is_default_damping_ratio"
+    )]
+    pub damping_ratio: f64,
 }
 
 impl Perturbation {
@@ -373,6 +406,7 @@ impl Perturbation {
         p.hysteresis_rad = model.hysteresis_rad;
         p.tilt_stiffness = model.tilt_stiffness_nm_per_rad.clone();
         p.thermal = model.thermal.clone();
+        p.damping_ratio = model.damping_ratio;
         Ok(p)
     }
 
@@ -393,6 +427,7 @@ impl Perturbation {
             soft_zone: Vec::new(),
             tilt_stiffness: Vec::new(),
             thermal: None,
+            damping_ratio: DEFAULT_DAMPING_RATIO,
         }
     }
 

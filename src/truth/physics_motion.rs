@@ -4,10 +4,11 @@
 //! the fast path ([`super::motion`], quasi-static) leaves out. What the two disagree by is what the fast path
 //! misses.
 //!
-//! Rapier integrates the springs implicitly (backward Euler): stable at any step, with a numerical damping of
-//! the joints' vibration of about ω·dt/2 per radian of phase (ω = √(k/J) is tens of rad/s for the iiwa), which
-//! stands in for the transmissions' own damping here: rapier's per-joint damping acts on the absolute joint
-//! velocity, not on the velocity across the transmission, and would drag the arm along any path.
+//! Each transmission is a spring k with a damper d across it: `τ = k (θ − q) + d (θ̇ − q̇)`. Rapier's joint
+//! spring pulls toward a rest angle and its joint damping acts on the absolute joint velocity, so the rest angle
+//! is set to `θ + (d/k) θ̇`: `−k (q − θ − (d/k) θ̇) − d q̇` is the same torque, and both parts stay implicit.
+//! Rapier integrates them by backward Euler, which adds a numerical damping of about ω·dt/2 (ω = √(k/J), up to
+//! ~900 rad/s at the iiwa's wrist): the step must be small against the physical damping ratio.
 
 use rapier3d::prelude::Real;
 
@@ -15,11 +16,13 @@ use super::physics::{ANG_X, PhysicsReference};
 use crate::error::{Error, Result};
 
 impl PhysicsReference {
-    /// The joint angles (rad) at each of `times` (ascending, s) of the arm whose springs' rest angles follow
-    /// `rest_at(t)`, starting at rest in the equilibrium of `rest_at(times[0])`, stepped at `dt` (s).
+    /// The joint angles (rad) at each of `times` (ascending, s) of the arm whose springs' rest angles (the
+    /// motor side) follow `rest_at(t)`, with `damping` (Nm·s/rad, per joint) across each transmission, starting
+    /// at rest in the equilibrium of `rest_at(times[0])`, stepped at `dt` (s).
     pub fn follow(
         &mut self,
         rest_at: &dyn Fn(f64) -> Vec<f64>,
+        damping: &[f64],
         times: &[f64],
         dt: f64,
     ) -> Result<Vec<Vec<f64>>> {
@@ -35,6 +38,15 @@ impl PhysicsReference {
                 "physics reference: time step {dt} s must be positive and the times ascending"
             )));
         }
+        if damping.len() != self.joints.len()
+            || damping.iter().any(|d| !(d.is_finite() && *d >= 0.0))
+        {
+            return Err(Error::Invalid(format!(
+                "physics reference: {} joint dampings for {} joints, each finite and non-negative",
+                damping.len(),
+                self.joints.len()
+            )));
+        }
         self.settle(&rest_at(t0))?;
         let links = self.dof_indices()?;
         let saved = self.world.integration_parameters.dt;
@@ -45,7 +57,10 @@ impl PhysicsReference {
                 .multibody_joints
                 .get_mut(self.joints[0].handle)
                 .ok_or_else(|| Error::Physics("multibody lost".into()))?;
-            mb.damping_mut().fill(0.0);
+            let dampings = mb.damping_mut();
+            for (&(_, dof), d) in links.iter().zip(damping) {
+                dampings[dof] = *d as Real;
+            }
         }
         let n = self.joints.len();
         let mut out = Vec::with_capacity(times.len());
@@ -53,19 +68,26 @@ impl PhysicsReference {
         let mut q = vec![0.0; n];
         for &target in times {
             while t + 0.5 * dt < target {
-                // The implicit spring acts with the rest angle at the end of the step.
+                // The implicit spring acts with the rest angle at the end of the step; the motor side's rate
+                // by a central difference (the path is smooth).
+                const H: f64 = 1e-5;
                 let rest = rest_at(t + dt);
+                let (ahead, behind) = (rest_at(t + dt + H), rest_at(t + dt - H));
                 let (mb, _) = self
                     .world
                     .multibody_joints
                     .get_mut(self.joints[0].handle)
                     .ok_or_else(|| Error::Physics("multibody lost".into()))?;
-                for ((slot, &(link_id, _)), r) in self.joints.iter().zip(&links).zip(&rest) {
+                for (j, (slot, &(link_id, _))) in self.joints.iter().zip(&links).enumerate() {
+                    let rate = (ahead[j] - behind[j]) / (2.0 * H);
                     let link = mb
                         .link_mut(link_id)
                         .ok_or_else(|| Error::Physics("multibody link lost".into()))?;
-                    link.joint
-                        .set_spring(ANG_X, slot.stiffness as Real, *r as Real);
+                    link.joint.set_spring(
+                        ANG_X,
+                        slot.stiffness as Real,
+                        (rest[j] + damping[j] / slot.stiffness * rate) as Real,
+                    );
                 }
                 self.world.step();
                 t += dt;

@@ -90,6 +90,11 @@ impl TrueState {
         }
     }
 
+    /// The torque each joint's load applies at the last solve (Nm).
+    pub(super) fn tau(&self) -> &[f64] {
+        &self.tau
+    }
+
     /// The settled arm of the last reach.
     pub fn deflection(&self) -> Deflection {
         Deflection {
@@ -248,6 +253,43 @@ impl TrueRobot {
             Some(zone) => zone.deflection(tau),
             None => self.compliance[i] * tau,
         }
+    }
+
+    /// Joint `i`'s stiffness at torque `tau` (Nm/rad): the slope of its torsion curve there.
+    pub(super) fn tangent_stiffness(&self, i: usize, tau: f64) -> f64 {
+        match self.perturbation.soft_zone.get(i) {
+            Some(zone) => zone.segment(zone.deflection(tau)).0,
+            None => self.perturbation.stiffness[i],
+        }
+    }
+
+    /// Each joint's viscous damping across its transmission (Nm·s/rad): `damping_ratio` of critical for the
+    /// joint's stiffness and the inertia it carries alone (the mass matrix's diagonal) at the approach posture
+    /// — a constant of the joint, as a transmission's damping is, sized where the arm works.
+    pub fn transmission_damping(&self) -> Vec<f64> {
+        let n = self.chain.dof();
+        let mut frames = Frames::new(&self.chain);
+        forward_kinematics(&self.chain, &self.approach, &mut frames);
+        let mut ws = Workspace::new(&self.chain);
+        let (zero, mut unit, mut column) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        (0..n)
+            .map(|i| {
+                unit.fill(0.0);
+                unit[i] = 1.0;
+                inverse_dynamics(
+                    &self.chain,
+                    &frames,
+                    &self.payload,
+                    &Vector3::zeros(),
+                    &zero,
+                    &unit,
+                    &mut ws,
+                    &mut column,
+                );
+                2.0 * self.perturbation.damping_ratio
+                    * (self.perturbation.stiffness[i] * column[i]).sqrt()
+            })
+            .collect()
     }
 
     /// Solves the static equilibrium from the unloaded angles `state.q0` at link lengths × `state.scale` by
