@@ -208,8 +208,8 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
          acceleration limits ({:.1} rad/s²), sampled at {:.0} Hz (every {}th sample kept); a {:.1} ms clock \
          offset between tracker and controller is estimated and removed first. Stop and go costs {per_point:.0} s \
          per point. Ground-truth mean (mm), median over {} seeds, on the same static grid; `trajectory.csv` has \
-         every run. The truth moves quasi-statically (inertial loads deflect the joints, the transmissions' \
-         vibration is not simulated).\n",
+         every run. The truth moves with its joints' dynamics: the motion's inertial loads deflect the compliant \
+         joints, which lag and ring about that deflection (`truth.damping_ratio`).\n",
         cfg.acceleration_rad_s2,
         cfg.sample_rate_hz,
         cfg.keep_every,

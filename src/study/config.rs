@@ -242,7 +242,8 @@ impl StudyConfig {
 
     /// The study's cost in core-seconds, estimated before anything runs: every campaign point simulated and
     /// fitted by every method, every evaluation point predicted by every run. The rates are measured on the
-    /// default study (`scenarios/default.toml`: 1 750 runs, 40 core-seconds on the 2-core reference machine;
+    /// default study (`scenarios/default.toml`: 1 575 stop-and-go runs, 63 core-seconds on the 2-core reference
+    /// machine, and 18 trajectory runs, 125;
     /// `benches/calibrate.rs` gives 16–65 µs per training point for the methods); a d-optimal pool adds a few
     /// per cent. An estimate to refuse absurd studies, not a prediction to the second.
     pub fn estimated_core_seconds(&self, regions: usize) -> f64 {
@@ -263,6 +264,33 @@ impl StudyConfig {
         combos * per_layout_and_seed
             + self.campaigns(regions) as f64 * methods * sets * EVALUATE_S_PER_POINT
             + regions as f64 * sets * SIMULATE_S_PER_POINT
+            + self.trajectory.as_ref().map_or(0.0, |t| {
+                // A path takes about a second per target at full speed and 1/speed as long slower (an upper
+                // bound: the default study's take 0.9, 1.4 and 2.4 s at speeds 1, 0.5 and 0.25). Per second of that
+                // bound a run costs 21 ms of one core besides its fits (the arm in motion at nodes every 2 ms, the
+                // tracker, the clock offset's search), and every kept sample is fitted as a point, twice with the
+                // motion as inputs: measured all-in on the default study, 125 core-seconds for 18 runs.
+                const PATH_S_PER_TARGET: f64 = 1.0;
+                const RUN_S_PER_PATH_S: f64 = 21e-3;
+                let targets: f64 = t
+                    .sizes
+                    .iter()
+                    .map(|&n| self.campaign_points(n) as f64)
+                    .sum();
+                let path_s: f64 = t
+                    .speeds
+                    .iter()
+                    .map(|s| targets * PATH_S_PER_TARGET / s)
+                    .sum();
+                let samples = path_s * t.sample_rate_hz / t.keep_every as f64;
+                let fits = if t.motion_inputs { 2.0 } else { 1.0 };
+                let runs = t.sizes.len() as f64 * t.speeds.len() as f64;
+                regions as f64
+                    * t.seeds as f64
+                    * (path_s * RUN_S_PER_PATH_S
+                        + samples * methods * fits * FIT_S_PER_POINT
+                        + runs * methods * fits * sets * EVALUATE_S_PER_POINT)
+            })
     }
 
     /// Tracker time (s) of one measured point: move, settle, measure.

@@ -1,8 +1,8 @@
 //! The rapier reference of the arm in motion: the compliant multibody of [`super::physics`] driven along a path
 //! by moving its springs' rest angles (the motor side), stepped at a small time step, so that the link side
-//! follows with its full dynamics — inertia, Coriolis and centrifugal loads, and the springs' own ringing, which
-//! the fast path ([`super::motion`], quasi-static) leaves out. What the two disagree by is what the fast path
-//! misses.
+//! follows with its full dynamics — inertia, Coriolis and centrifugal loads, and the springs' own ringing — in
+//! rapier's own integrator: the reference the fast path ([`super::motion`], linearised about the quasi-static
+//! deflection) is held against in `tests/motion.rs`.
 //!
 //! Each transmission is a spring k with a damper d across it: `τ = k (θ − q) + d (θ̇ − q̇)`. Rapier's joint
 //! spring pulls toward a rest angle and its joint damping acts on the absolute joint velocity, so the rest angle

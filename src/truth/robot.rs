@@ -301,16 +301,27 @@ impl TrueRobot {
 
     /// [`TrueRobot::deflect`] of the arm in motion: with `motion = (q̇, q̈)` (rad/s, rad/s²) each joint carries
     /// the full inverse-dynamics torque of the true links (inertial, Coriolis and centrifugal terms beside
-    /// gravity) instead of the gravity torque alone — quasi-static: the transmission's own vibration is not
-    /// modelled. Tilt still follows the gravity moment. With `None` it is the static solve, bit for bit.
+    /// gravity) instead of the gravity torque alone — quasi-static: the transmission's own vibration is added
+    /// about it by [`super::motion`]. Tilt still follows the gravity moment. With `None` it is the static solve,
+    /// bit for bit.
     pub fn deflect_moving(
         &self,
         state: &mut TrueState,
         motion: Option<(&[f64], &[f64])>,
     ) -> Result<usize> {
         state.q.copy_from_slice(&state.q0);
-        let tilting = self.tilts();
         state.tilt.fill(Vector3::zeros());
+        self.deflect_from_guess(state, motion)
+    }
+
+    /// [`TrueRobot::deflect_moving`] started from the angles and tilts already in `state` (an arm in motion
+    /// starts from where it was a step ago: a fraction of the iterations).
+    pub(super) fn deflect_from_guess(
+        &self,
+        state: &mut TrueState,
+        motion: Option<(&[f64], &[f64])>,
+    ) -> Result<usize> {
+        let tilting = self.tilts();
         for iter in 1..=FIXED_POINT_MAX_ITERS {
             self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
             if tilting {
