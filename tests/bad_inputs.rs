@@ -265,6 +265,15 @@ fn cases(f: &Fixture) -> Vec<Case> {
             vec!["study.seeds", "exceed"],
         ),
         (
+            "undamped joints",
+            edit(
+                &small,
+                "hysteresis_rad = 2e-4",
+                "hysteresis_rad = 2e-4\ndamping_ratio = 0.0",
+            ),
+            vec!["truth.damping_ratio = 0", "(0, 2]"],
+        ),
+        (
             "not TOML",
             "name = \"x\"\n[[regions]\n".into(),
             vec!["line 2"],
