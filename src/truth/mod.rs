@@ -3,7 +3,7 @@ pub mod history;
 pub mod motion;
 pub mod perturbation;
 pub mod physics;
-mod physics_motion;
+pub mod physics_motion;
 pub mod robot;
 pub mod stiffness;
 pub mod thermal;
