@@ -35,8 +35,8 @@ use rand_chacha::ChaCha8Rng;
 use super::history::Visit;
 use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
+use crate::robot::Frames;
 use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
-use crate::robot::{Frames, Payload};
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
@@ -91,9 +91,6 @@ struct Remainder {
     before: Option<(f64, DVector<f64>)>,
     linear: Linear,
     linearized_at: f64,
-    /// The step's effective stiffness, factorised, and the step it is for (the matrices and, mostly, the step
-    /// stay the same from one node to the next).
-    effective: Option<(f64, nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>)>,
 }
 
 /// The settled arm at a sample, before repeatability noise.
@@ -186,7 +183,6 @@ impl TrueRobot {
 
     /// M, C = D + B and S = K_t + A at the quasi-static state of `state` (frames at its angles, `tau` the load
     /// torque) moving at (`qd`, `qdd`).
-    #[allow(clippy::too_many_arguments)]
     fn linearize(
         &self,
         state: &TrueState,
@@ -201,17 +197,25 @@ impl TrueRobot {
                       gravity: &Vector3<f64>,
                       qd: &[f64],
                       qdd: &[f64],
-                      ws: &mut Workspace,
-                      payload: &Payload| {
+                      ws: &mut Workspace| {
             let mut out = vec![0.0; n];
-            inverse_dynamics(&self.chain, frames, payload, gravity, qd, qdd, ws, &mut out);
+            inverse_dynamics(
+                &self.chain,
+                frames,
+                &self.payload,
+                gravity,
+                qd,
+                qdd,
+                ws,
+                &mut out,
+            );
             DVector::from_vec(out)
         };
         let zero = vec![0.0; n];
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
-        let base = torque(&state.frames, &self.gravity, qd, qdd, ws, &self.payload);
+        let base = torque(&state.frames, &self.gravity, qd, qdd, ws);
         // Forward differences: their error (a step's share of the curvature) is a millionth of the sensitivity,
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
@@ -221,30 +225,16 @@ impl TrueRobot {
             unit[j] = 1.0;
             m.set_column(
                 j,
-                &torque(
-                    &state.frames,
-                    &Vector3::zeros(),
-                    &zero,
-                    &unit,
-                    ws,
-                    &self.payload,
-                ),
+                &torque(&state.frames, &Vector3::zeros(), &zero, &unit, ws),
             );
             let mut faster = qd.to_vec();
             faster[j] += RATE;
-            let ahead = torque(
-                &state.frames,
-                &self.gravity,
-                &faster,
-                qdd,
-                ws,
-                &self.payload,
-            );
+            let ahead = torque(&state.frames, &self.gravity, &faster, qdd, ws);
             c.set_column(j, &((ahead - &base) / RATE));
             let mut q = state.q.clone();
             q[j] += ANGLE;
             self.kinematics(&q, &state.tilt, state.scale, frames);
-            let ahead = torque(frames, &self.gravity, qd, qdd, ws, &self.payload);
+            let ahead = torque(frames, &self.gravity, qd, qdd, ws);
             s.set_column(j, &((ahead - &base) / ANGLE));
         }
         for i in 0..n {
@@ -299,7 +289,6 @@ impl Walk<'_> {
         robot.unloaded_angles_after(&p.q, &visit, &mut state.q0);
         state.scale = robot.length_scale(&visit);
         match &self.remainder {
-            // From the last node's deflection and tilt.
             // From the last nodes' deflection, extrapolated along its trend, and the last tilt.
             Some(r) => {
                 let trend = match &r.before {
@@ -347,7 +336,6 @@ impl Walk<'_> {
                     before: None,
                     linear,
                     linearized_at: t,
-                    effective: None,
                 });
             }
             (Some(r), linear) => {
@@ -362,7 +350,6 @@ impl Walk<'_> {
                         .ok_or_else(|| singular(t))?;
                     r.linear = linear;
                     r.linearized_at = t;
-                    r.effective = None;
                 }
                 r.step(t, quasi_static)?;
             }
@@ -419,16 +406,12 @@ impl Remainder {
         if h > 0.0 {
             let Linear { m, c, s } = &self.linear;
             let (a0, a1) = (4.0 / (h * h), 2.0 / h);
-            if self.effective.as_ref().is_none_or(|(step, _)| *step != h) {
-                self.effective = Some((h, (s + c * a1 + m * a0).lu()));
-            }
             let rhs = s * &quasi_static
                 + m * (&self.z * a0 + &self.v * (4.0 / h) + &self.a)
                 + c * (&self.z * a1 + &self.v);
-            let z = self
-                .effective
-                .as_ref()
-                .and_then(|(_, lu)| lu.solve(&rhs))
+            let z = (s + c * a1 + m * a0)
+                .lu()
+                .solve(&rhs)
                 .ok_or_else(|| singular(t))?;
             let v = (&z - &self.z) * a1 - &self.v;
             let a = (&z - &self.z) * a0 - &self.v * (4.0 / h) - &self.a;

@@ -30,7 +30,7 @@ use super::stiffness::SoftZone;
 use crate::error::{Error, Result};
 
 /// Index of the URDF joint axis in rapier's 6-DoF joint layout (`AngX`): the loader aligns the
-/// joint frame's X axis with the URDF `<axis>`.
+/// joint frame's X axis with the URDF `<axis>` (and [`super::physics_motion`] builds its frames the same way).
 pub(super) const ANG_X: usize = 3;
 
 /// How the reference world is stepped to equilibrium.
@@ -77,16 +77,16 @@ pub struct Settled {
 
 /// One caller joint: its name and the multibody joint that moves it.
 #[derive(Debug, Clone)]
-pub(super) struct JointSlot {
-    pub(super) name: String,
-    pub(super) handle: MultibodyJointHandle,
-    pub(super) stiffness: f64,
+struct JointSlot {
+    name: String,
+    handle: MultibodyJointHandle,
+    stiffness: f64,
 }
 
 /// A rapier world holding the compliant arm.
 pub struct PhysicsReference {
-    pub(super) world: PhysicsWorld,
-    pub(super) joints: Vec<JointSlot>,
+    world: PhysicsWorld,
+    joints: Vec<JointSlot>,
     opts: SettleOptions,
     /// Load-dependent stiffness per joint (empty: the linear springs of `joints`).
     soft_zones: Vec<SoftZone>,
@@ -372,7 +372,7 @@ impl PhysicsReference {
     }
 
     /// Offsets of the caller's joints in the multibody's generalized coordinates.
-    pub(super) fn dof_indices(&self) -> Result<Vec<(usize, usize)>> {
+    fn dof_indices(&self) -> Result<Vec<(usize, usize)>> {
         self.joints
             .iter()
             .map(|j| {
@@ -389,7 +389,7 @@ impl PhysicsReference {
             .collect()
     }
 
-    pub(super) fn read_q(&self, links: &[(usize, usize)], out: &mut [f64]) -> Result<()> {
+    fn read_q(&self, links: &[(usize, usize)], out: &mut [f64]) -> Result<()> {
         let (mb, _) = self
             .world
             .multibody_joints

@@ -22,12 +22,10 @@ use rapier3d_f64::prelude::{
     PhysicsWorld, RigidBodyBuilder,
 };
 
+use super::physics::ANG_X;
 use super::robot::{TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::{Frames, Inertial, JointKind, forward_kinematics};
-
-/// Index of the joint's axis in rapier's 6-DoF joint layout (`AngX`): the joint frames put X on the axis.
-const ANG_X: usize = 3;
 
 /// A rapier f64 world holding the true arm with compliant, damped joints.
 pub struct MotionReference {
