@@ -3,7 +3,7 @@
 //! **Layering** (each file imports only files above it in this list; none imports the registry but the stages
 //! that choose a method):
 //!
-//! 1. `rigid` (point-set registration by SVD), `regression` (ridge models and their selection),
+//! 1. `rigid` (point-set registration by SVD), `regression/` (ridge models and their selection),
 //!    `error_model` (the paper's error parameters on the DH chain) — no other file of calib;
 //! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
 //!    — `rigid`;

@@ -13,11 +13,17 @@
 //! on the size of `x⁵`. The intercept is left unpenalized by centring features and target, so a constant
 //! offset in an error parameter is never shrunk.
 
+mod design;
+mod model;
+mod stats;
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::numeric;
+use design::{Block, Design, Target, build};
+pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
+pub use stats::r2;
 
 /// Search space of [`fit_all`].
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -59,501 +65,6 @@ impl Default for RegressionOptions {
             cross_terms: false,
             parsimony_z: 1.0,
         }
-    }
-}
-
-/// A fitted model, self-contained so it can be stored with a calibration and applied later to raw
-/// candidate rows.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct RidgeModel {
-    /// Candidate columns used, in rank order of |correlation| with the target on training data. Empty for
-    /// an intercept-only model (constant target, or no candidate varies).
-    pub inputs: Vec<usize>,
-    /// Polynomial degree applied to every input (0 for an intercept-only model).
-    pub degree: usize,
-    pub alpha: f64,
-    /// Whether the features include the pairwise products of the inputs; only ever set with degree ≥ 2.
-    pub cross_terms: bool,
-    /// Training mean and standard deviation of each used input.
-    pub input_mean: Vec<f64>,
-    pub input_scale: Vec<f64>,
-    /// Training mean and standard deviation of each feature, in [`RidgeModel::predict`]'s feature order:
-    /// for each input its powers 1..=degree, then the products of input pairs (i < j) in `inputs` order.
-    pub feature_mean: Vec<f64>,
-    pub feature_scale: Vec<f64>,
-    pub coef: Vec<f64>,
-    pub intercept: f64,
-    /// R² (eq. 20) on the validation set; see [`r2`] for a constant validation target.
-    pub validation_r2: f64,
-}
-
-impl RidgeModel {
-    /// Evaluates the model on one row of candidate inputs (the same columns `fit_all` saw).
-    ///
-    /// Panics if `candidates` is shorter than the largest index in `inputs`.
-    pub fn predict(&self, candidates: &[f64]) -> f64 {
-        let z = |i: usize| (candidates[self.inputs[i]] - self.input_mean[i]) / self.input_scale[i];
-        let mut acc = self.intercept;
-        let mut j = 0;
-        let mut add = |raw: f64, j: &mut usize| {
-            acc += self.coef[*j] * ((raw - self.feature_mean[*j]) / self.feature_scale[*j]);
-            *j += 1;
-        };
-        for i in 0..self.inputs.len() {
-            let zi = z(i);
-            let mut p = zi;
-            for _ in 0..self.degree {
-                add(p, &mut j);
-                p *= zi;
-            }
-        }
-        if self.cross_terms {
-            for a in 0..self.inputs.len() {
-                for b in a + 1..self.inputs.len() {
-                    add(z(a) * z(b), &mut j);
-                }
-            }
-        }
-        acc
-    }
-
-    pub fn n_features(&self) -> usize {
-        n_features(self.inputs.len(), self.degree, self.cross_terms)
-    }
-
-    /// A model read from a file can predict from rows of `n_candidates` candidate inputs: its inputs are
-    /// distinct candidates, every per-input and per-feature list has one entry per input or feature, scales
-    /// are positive, and every number is finite and of a size a fit on metres and radians gives (see
-    /// [`MAX_COEFFICIENT`], [`MAX_DEGREE`]). Fields are named as the file writes them.
-    pub fn validate(&self, n_candidates: usize) -> Result<()> {
-        let invalid = |field: &str, m: String| Err(Error::Invalid(format!("{field}: {m}")));
-        for (k, &i) in self.inputs.iter().enumerate() {
-            if i >= n_candidates {
-                return invalid(
-                    &format!("inputs[{k}]"),
-                    format!("candidate {i} of {n_candidates} (they count from 0)"),
-                );
-            }
-            if self.inputs[..k].contains(&i) {
-                return invalid(
-                    &format!("inputs[{k}]"),
-                    format!("candidate {i} appears twice"),
-                );
-            }
-        }
-        if self.degree > MAX_DEGREE {
-            return invalid(
-                "degree",
-                format!(
-                    "{} is above the largest plausible {MAX_DEGREE}",
-                    self.degree
-                ),
-            );
-        }
-        if self.cross_terms && self.degree < 2 {
-            return invalid(
-                "cross_terms",
-                format!(
-                    "set with degree {}; products need degree 2 or more",
-                    self.degree
-                ),
-            );
-        }
-        let k = self.inputs.len();
-        let p = self.n_features();
-        for (field, len, want, of) in [
-            ("input_mean", self.input_mean.len(), k, "inputs"),
-            ("input_scale", self.input_scale.len(), k, "inputs"),
-            ("feature_mean", self.feature_mean.len(), p, "features"),
-            ("feature_scale", self.feature_scale.len(), p, "features"),
-            ("coef", self.coef.len(), p, "features"),
-        ] {
-            if len != want {
-                return invalid(
-                    field,
-                    format!(
-                        "{len} entries for {want} {of} ({k} inputs of degree {}{})",
-                        self.degree,
-                        if self.cross_terms {
-                            " with cross terms"
-                        } else {
-                            ""
-                        }
-                    ),
-                );
-            }
-        }
-        let finite = |field: &str, v: &[f64]| -> Result<()> {
-            match v.iter().position(|x| !x.is_finite()) {
-                Some(i) => invalid(&format!("{field}[{i}]"), format!("{} is not finite", v[i])),
-                None => Ok(()),
-            }
-        };
-        let positive = |field: &str, v: &[f64]| -> Result<()> {
-            finite(field, v)?;
-            match v.iter().position(|x| *x <= 0.0) {
-                Some(i) => invalid(
-                    &format!("{field}[{i}]"),
-                    format!("{:e}: a scale must be positive", v[i]),
-                ),
-                None => Ok(()),
-            }
-        };
-        finite("input_mean", &self.input_mean)?;
-        positive("input_scale", &self.input_scale)?;
-        finite("feature_mean", &self.feature_mean)?;
-        positive("feature_scale", &self.feature_scale)?;
-        finite("coef", &self.coef)?;
-        if let Some(i) = self.coef.iter().position(|c| c.abs() > MAX_COEFFICIENT) {
-            return invalid(
-                &format!("coef[{i}]"),
-                format!(
-                    "{:e} is not a coefficient a fit on metres and radians gives (at most {MAX_COEFFICIENT} \
-                     in magnitude)",
-                    self.coef[i]
-                ),
-            );
-        }
-        if !(self.intercept.is_finite() && self.intercept.abs() <= MAX_COEFFICIENT) {
-            return invalid(
-                "intercept",
-                format!(
-                    "{:e} is not an intercept a fit on metres and radians gives (at most \
-                     {MAX_COEFFICIENT} in magnitude)",
-                    self.intercept
-                ),
-            );
-        }
-        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
-            return invalid("alpha", format!("{} is not finite and >= 0", self.alpha));
-        }
-        if !self.validation_r2.is_finite() {
-            return invalid(
-                "validation_r2",
-                format!("{} is not finite", self.validation_r2),
-            );
-        }
-        Ok(())
-    }
-}
-
-/// The largest |coefficient| (and |intercept|) a saved model may have. Each coefficient multiplies a feature
-/// standardized on the training data (unit variance), so it is the error, in metres or radians, that one
-/// standard deviation of the feature explains; the intercept is the mean error. Real fits give below 0.1
-/// (millimetres and milliradians, a few times more where collinear powers cancel); 1e3 — a kilometre or 160
-/// turns per standard deviation — is no calibration error, while 1e300 overflows the prediction.
-pub const MAX_COEFFICIENT: f64 = 1e3;
-
-/// The largest polynomial degree a saved model may have. The default search stops at 5; an input spread
-/// evenly reaches √3 once standardized, whose powers overflow (which the fit refuses) from degree 1292 on.
-/// The cap also keeps the feature count from overflowing and a prediction's loop over the powers short.
-pub const MAX_DEGREE: usize = 1000;
-
-fn n_features(k: usize, degree: usize, cross: bool) -> usize {
-    k * degree
-        + if cross {
-            k * k.saturating_sub(1) / 2
-        } else {
-            0
-        }
-}
-
-/// Coefficient of determination (eq. 20).
-///
-/// When `y` has no variance (to 1e-12 of its magnitude), eq. 20 divides by zero; as in scikit-learn the
-/// result is then 1 if the predictions match `y` to the same precision and 0 otherwise, so an error
-/// parameter that is identically zero and predicted as zero counts as perfectly explained. Empty input
-/// gives 0.
-///
-/// Panics if the lengths differ.
-pub fn r2(y: &[f64], y_hat: &[f64]) -> f64 {
-    assert_eq!(y.len(), y_hat.len(), "r2: y and y_hat lengths differ");
-    if y.is_empty() {
-        return 0.0;
-    }
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let sst = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
-    let sse = y
-        .iter()
-        .zip(y_hat)
-        .map(|(v, h)| (v - h).powi(2))
-        .sum::<f64>();
-    r2_from_sums(sse, sst, zero_sum_tol(y))
-}
-
-/// A sum of squares at or below this is rounding noise of values of `y`'s magnitude.
-fn zero_sum_tol(y: &[f64]) -> f64 {
-    let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    y.len() as f64 * (ZERO_REL * scale).powi(2)
-}
-
-/// Relative spread below which a column counts as constant: means of identical values differ from them
-/// by rounding only (~1e-16), while any real variation is far above 1e-12.
-const ZERO_REL: f64 = 1e-12;
-
-fn r2_from_sums(sse: f64, sst: f64, tol: f64) -> f64 {
-    if sst <= tol {
-        if sse <= tol { 1.0 } else { 0.0 }
-    } else {
-        1.0 - sse / sst
-    }
-}
-
-/// Mean and population standard deviation, with `None` for a column that does not vary.
-fn standardization(values: impl Iterator<Item = f64> + Clone, n: usize) -> (f64, Option<f64>) {
-    let mean = values.clone().sum::<f64>() / n as f64;
-    let sd = (values.map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-    if sd == 0.0 || sd <= ZERO_REL * mean.abs() {
-        (mean, None)
-    } else {
-        (mean, Some(sd))
-    }
-}
-
-/// Everything that does not depend on the target: standardized features of all candidates at the largest
-/// degree (column `c·D + p − 1` is candidate `c` to the power `p`; then the cross products of candidate
-/// pairs) and their Gram matrices.
-struct Design {
-    n_cand: usize,
-    max_degree: usize,
-    cross: bool,
-    input_mean: Vec<f64>,
-    input_scale: Vec<f64>,
-    /// Candidates that vary on the training set; the others can explain nothing and are never selected.
-    usable: Vec<bool>,
-    feature_mean: Vec<f64>,
-    feature_scale: Vec<f64>,
-    f_train: DMatrix<f64>,
-    f_val: DMatrix<f64>,
-    g_train: DMatrix<f64>,
-    g_val: DMatrix<f64>,
-}
-
-impl Design {
-    fn new(
-        x_train: &DMatrix<f64>,
-        x_val: &DMatrix<f64>,
-        max_degree: usize,
-        cross: bool,
-    ) -> Result<Design> {
-        let (n, c) = x_train.shape();
-        let mut input_mean = Vec::with_capacity(c);
-        let mut input_scale = Vec::with_capacity(c);
-        let mut usable = Vec::with_capacity(c);
-        for col in x_train.column_iter() {
-            let (m, s) = standardization(col.iter().copied(), n);
-            input_mean.push(m);
-            input_scale.push(s.unwrap_or(1.0));
-            usable.push(s.is_some());
-        }
-        let cross = cross && max_degree >= 2;
-        let n_pairs = if cross {
-            c * c.saturating_sub(1) / 2
-        } else {
-            0
-        };
-        let p = c * max_degree + n_pairs;
-        let raw = |x: &DMatrix<f64>| {
-            let rows = x.nrows();
-            let mut f = DMatrix::<f64>::zeros(rows, p);
-            for r in 0..rows {
-                let z = |k: usize| (x[(r, k)] - input_mean[k]) / input_scale[k];
-                for k in 0..c {
-                    let zk = z(k);
-                    let mut v = zk;
-                    for d in 0..max_degree {
-                        f[(r, k * max_degree + d)] = v;
-                        v *= zk;
-                    }
-                }
-                if cross {
-                    let mut col = c * max_degree;
-                    for a in 0..c {
-                        for b in a + 1..c {
-                            f[(r, col)] = z(a) * z(b);
-                            col += 1;
-                        }
-                    }
-                }
-            }
-            f
-        };
-        let mut f_train = raw(x_train);
-        let mut f_val = raw(x_val);
-        if f_train.iter().chain(f_val.iter()).any(|v| !v.is_finite()) {
-            // The cause is an input far from the others (an outlier, a wrong unit), not the degree.
-            let (mut worst, mut at) = (0.0_f64, 0);
-            for x in [x_train, x_val] {
-                for r in 0..x.nrows() {
-                    for k in 0..c {
-                        let z = ((x[(r, k)] - input_mean[k]) / input_scale[k]).abs();
-                        if z.is_nan() || z > worst {
-                            (worst, at) = (z, k);
-                        }
-                    }
-                }
-            }
-            return Err(Error::Invalid(format!(
-                "regression: polynomial features of degree {max_degree} overflow: a value of input {} lies \
-                 {worst:.1e} standard deviations from its training mean (an outlier or a wrong unit in the data)",
-                at + 1
-            )));
-        }
-        let mut feature_mean = Vec::with_capacity(p);
-        let mut feature_scale = Vec::with_capacity(p);
-        for j in 0..p {
-            let (m, s) = standardization(f_train.column(j).iter().copied(), n);
-            let scale = s.unwrap_or(1.0);
-            feature_mean.push(m);
-            feature_scale.push(scale);
-            match s {
-                // A constant feature (z² of a two-valued input) carries nothing; exact zeros give it a
-                // zero coefficient instead of one fitted to rounding noise.
-                None => f_train.column_mut(j).fill(0.0),
-                Some(_) => f_train.column_mut(j).apply(|v| *v = (*v - m) / scale),
-            }
-            f_val.column_mut(j).apply(|v| *v = (*v - m) / scale);
-        }
-        let g_train = f_train.tr_mul(&f_train);
-        let g_val = f_val.tr_mul(&f_val);
-        Ok(Design {
-            n_cand: c,
-            max_degree,
-            cross,
-            input_mean,
-            input_scale,
-            usable,
-            feature_mean,
-            feature_scale,
-            f_train,
-            f_val,
-            g_train,
-            g_val,
-        })
-    }
-
-    /// Validation residuals `y_val − ŷ` of a fitted structure; only the few structures that compete for the
-    /// final choice need them.
-    fn val_residuals(&self, target: &Target, f: &RidgeFit) -> Vec<f64> {
-        let idx = self.feature_indices(&f.inputs, f.degree);
-        (0..self.f_val.nrows())
-            .map(|r| {
-                target.r[r]
-                    - idx
-                        .iter()
-                        .zip(f.w.iter())
-                        .map(|(&j, w)| self.f_val[(r, j)] * w)
-                        .sum::<f64>()
-            })
-            .collect()
-    }
-
-    /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.
-    fn feature_indices(&self, inputs: &[usize], degree: usize) -> Vec<usize> {
-        let mut idx: Vec<usize> = inputs
-            .iter()
-            .flat_map(|&k| (0..degree).map(move |d| k * self.max_degree + d))
-            .collect();
-        if self.cross && degree >= 2 {
-            let c = self.n_cand;
-            for (i, &a) in inputs.iter().enumerate() {
-                for &b in &inputs[i + 1..] {
-                    let (lo, hi) = (a.min(b), a.max(b));
-                    idx.push(c * self.max_degree + lo * c - lo * (lo + 1) / 2 + (hi - lo - 1));
-                }
-            }
-        }
-        idx
-    }
-}
-
-/// The target-dependent sums: `Fᵀ(y − ȳ)` on training data and, with `r = y_val − ȳ` (the residual of the
-/// intercept alone), `Fᵥᵀr` and `rᵀr`.
-struct Target {
-    mean: f64,
-    constant: bool,
-    yy: f64,
-    b: DVector<f64>,
-    cv: DVector<f64>,
-    r: DVector<f64>,
-    rr: f64,
-    sst_val: f64,
-    tol_val: f64,
-}
-
-impl Target {
-    fn new(design: &Design, y: &[f64], y_val: &[f64]) -> Target {
-        let n = y.len();
-        let (mean, sd) = standardization(y.iter().copied(), n);
-        let yc = DVector::from_iterator(n, y.iter().map(|v| v - mean));
-        let r = DVector::from_iterator(y_val.len(), y_val.iter().map(|v| v - mean));
-        let val_mean = y_val.iter().sum::<f64>() / y_val.len() as f64;
-        Target {
-            mean,
-            constant: sd.is_none(),
-            yy: yc.norm_squared(),
-            b: design.f_train.tr_mul(&yc),
-            cv: design.f_val.tr_mul(&r),
-            rr: r.norm_squared(),
-            r,
-            sst_val: y_val.iter().map(|v| (v - val_mean).powi(2)).sum(),
-            tol_val: zero_sum_tol(y_val),
-        }
-    }
-
-    fn r2(&self, sse: f64) -> f64 {
-        r2_from_sums(sse, self.sst_val, self.tol_val)
-    }
-}
-
-/// The Gram sub-blocks of one (inputs, degree) structure, reused across α.
-struct Block {
-    g: DMatrix<f64>,
-    gv: DMatrix<f64>,
-    b: DVector<f64>,
-    cv: DVector<f64>,
-}
-
-impl Block {
-    fn new(design: &Design, target: &Target, idx: &[usize]) -> Block {
-        let n = idx.len();
-        Block {
-            g: DMatrix::from_fn(n, n, |a, b| design.g_train[(idx[a], idx[b])]),
-            gv: DMatrix::from_fn(n, n, |a, b| design.g_val[(idx[a], idx[b])]),
-            b: DVector::from_fn(n, |a, _| target.b[idx[a]]),
-            cv: DVector::from_fn(n, |a, _| target.cv[idx[a]]),
-        }
-    }
-
-    /// Ridge coefficients and the validation SSE they give.
-    fn solve(&self, target: &Target, alpha: f64) -> (DVector<f64>, f64) {
-        let n = self.g.nrows();
-        let shifted = || {
-            let mut a = self.g.clone();
-            for i in 0..n {
-                a[(i, i)] += alpha;
-            }
-            a
-        };
-        let w = match shifted().cholesky() {
-            Some(ch) => ch.solve(&self.b),
-            // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
-            // the limit of ridge as α → 0.
-            None => {
-                // A Gram matrix that is not finite gives NaN coefficients and a NaN score, which the
-                // search never chooses, rather than an SVD that never returns.
-                match numeric::svd(shifted(), true, true, "ridge") {
-                    Ok(svd) => {
-                        let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
-                        svd.solve(&self.b, eps)
-                            .unwrap_or_else(|_| DVector::zeros(n))
-                    }
-                    Err(_) => DVector::from_element(n, f64::NAN),
-                }
-            }
-        };
-        let sse = target.rr - 2.0 * w.dot(&self.cv) + w.dot(&(&self.gv * &w));
-        (w, sse.max(0.0))
     }
 }
 
@@ -684,38 +195,32 @@ fn fit_one(
     if target.constant {
         return Ok(intercept_only());
     }
-    let mut ranked: Vec<(usize, f64)> = (0..design.n_cand)
-        .filter(|&c| design.usable[c])
-        .map(|c| {
-            let j = c * design.max_degree;
-            let denom = (design.g_train[(j, j)] * target.yy).sqrt();
-            (
-                c,
-                if denom > 0.0 {
-                    (target.b[j] / denom).abs()
-                } else {
-                    0.0
-                },
-            )
-        })
-        .collect();
-    ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    let limit = if opts.max_inputs == 0 {
-        usize::MAX
-    } else {
-        opts.max_inputs
-    };
-    let order: Vec<usize> = ranked
-        .iter()
-        .enumerate()
-        .take_while(|(i, (_, r))| *i == 0 || *r >= opts.min_correlation)
-        .take(limit)
-        .map(|(_, (c, _))| *c)
-        .collect();
+    let order = design.ranked_inputs(target, opts.min_correlation, opts.max_inputs);
     if order.is_empty() {
         return Ok(intercept_only());
     }
+    let fitted = fit_structures(design, target, &order, n, alphas);
+    let choice = choose(design, target, fitted, n, opts.parsimony_z)?;
+    Ok(build(
+        design,
+        target,
+        &choice.inputs,
+        choice.degree,
+        choice.alpha,
+        &choice.w,
+        choice.sse,
+    ))
+}
 
+/// Every structure (the top k of `order` at each degree) that `n` training points can fit, each with the α
+/// that gives the lowest validation SSE.
+fn fit_structures(
+    design: &Design,
+    target: &Target,
+    order: &[usize],
+    n: usize,
+    alphas: &[f64],
+) -> Vec<RidgeFit> {
     let mut fitted = Vec::new();
     for k in 1..=order.len() {
         for degree in 1..=design.max_degree {
@@ -744,6 +249,19 @@ fn fit_one(
             });
         }
     }
+    fitted
+}
+
+/// The structure chosen: from the fewest features up, a larger one replaces the choice only if its validation
+/// SSE is lower by more than `parsimony_z` standard errors of the paired difference (see
+/// [`RegressionOptions::parsimony_z`]).
+fn choose(
+    design: &Design,
+    target: &Target,
+    mut fitted: Vec<RidgeFit>,
+    n: usize,
+    parsimony_z: f64,
+) -> Result<RidgeFit> {
     fitted.sort_by_key(|f| (f.n_features, f.inputs.len()));
     let mut fitted = fitted.into_iter();
     let Some(mut choice) = fitted.next() else {
@@ -752,12 +270,13 @@ fn fit_one(
              plus intercept)"
         )));
     };
-    let mut choice_res = design.val_residuals(target, &choice);
+    let residuals = |f: &RidgeFit| design.val_residuals(target, &f.inputs, f.degree, &f.w);
+    let mut choice_res = residuals(&choice);
     for f in fitted {
         if f.sse >= choice.sse {
             continue;
         }
-        let res = design.val_residuals(target, &f);
+        let res = residuals(&f);
         let d: Vec<f64> = choice_res
             .iter()
             .zip(&res)
@@ -766,44 +285,11 @@ fn fit_one(
         let m = d.len() as f64;
         let gain = d.iter().sum::<f64>();
         let var = d.iter().map(|v| (v - gain / m).powi(2)).sum::<f64>() / (m - 1.0).max(1.0);
-        if gain > opts.parsimony_z * (m * var).sqrt() {
+        if gain > parsimony_z * (m * var).sqrt() {
             (choice, choice_res) = (f, res);
         }
     }
-    Ok(build(
-        design,
-        target,
-        &choice.inputs,
-        choice.degree,
-        choice.alpha,
-        &choice.w,
-        choice.sse,
-    ))
-}
-
-fn build(
-    design: &Design,
-    target: &Target,
-    inputs: &[usize],
-    degree: usize,
-    alpha: f64,
-    w: &DVector<f64>,
-    sse: f64,
-) -> RidgeModel {
-    let idx = design.feature_indices(inputs, degree);
-    RidgeModel {
-        inputs: inputs.to_vec(),
-        degree,
-        alpha,
-        cross_terms: design.cross && degree >= 2 && inputs.len() >= 2,
-        input_mean: inputs.iter().map(|&c| design.input_mean[c]).collect(),
-        input_scale: inputs.iter().map(|&c| design.input_scale[c]).collect(),
-        feature_mean: idx.iter().map(|&j| design.feature_mean[j]).collect(),
-        feature_scale: idx.iter().map(|&j| design.feature_scale[j]).collect(),
-        coef: w.iter().copied().collect(),
-        intercept: target.mean,
-        validation_r2: target.r2(sse),
-    }
+    Ok(choice)
 }
 
 #[cfg(test)]

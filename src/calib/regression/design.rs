@@ -1,0 +1,357 @@
+//! The target-independent half of the regression ([`Design`]: standardized features of every candidate at the
+//! largest degree and their Gram matrices), the sums one target adds ([`Target`]), and the solve of one
+//! structure on sub-blocks of the Grams ([`Block`]); see the module notes of `regression`.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::model::RidgeModel;
+use super::stats::{r2_from_sums, standardization, zero_sum_tol};
+use crate::error::{Error, Result};
+use crate::numeric;
+
+/// Everything that does not depend on the target: standardized features of all candidates at the largest
+/// degree (column `c·D + p − 1` is candidate `c` to the power `p`; then the cross products of candidate
+/// pairs) and their Gram matrices.
+pub(super) struct Design {
+    n_cand: usize,
+    pub(super) max_degree: usize,
+    cross: bool,
+    input_mean: Vec<f64>,
+    input_scale: Vec<f64>,
+    /// Candidates that vary on the training set; the others can explain nothing and are never selected.
+    usable: Vec<bool>,
+    feature_mean: Vec<f64>,
+    feature_scale: Vec<f64>,
+    f_train: DMatrix<f64>,
+    f_val: DMatrix<f64>,
+    g_train: DMatrix<f64>,
+    g_val: DMatrix<f64>,
+}
+
+impl Design {
+    pub(super) fn new(
+        x_train: &DMatrix<f64>,
+        x_val: &DMatrix<f64>,
+        max_degree: usize,
+        cross: bool,
+    ) -> Result<Design> {
+        let (n, c) = x_train.shape();
+        let mut input_mean = Vec::with_capacity(c);
+        let mut input_scale = Vec::with_capacity(c);
+        let mut usable = Vec::with_capacity(c);
+        for col in x_train.column_iter() {
+            let (m, s) = standardization(col.iter().copied(), n);
+            input_mean.push(m);
+            input_scale.push(s.unwrap_or(1.0));
+            usable.push(s.is_some());
+        }
+        let cross = cross && max_degree >= 2;
+        let n_pairs = if cross {
+            c * c.saturating_sub(1) / 2
+        } else {
+            0
+        };
+        let p = c * max_degree + n_pairs;
+        let raw = |x| raw_features(x, &input_mean, &input_scale, max_degree, cross, p);
+        let mut f_train = raw(x_train);
+        let mut f_val = raw(x_val);
+        if f_train.iter().chain(f_val.iter()).any(|v| !v.is_finite()) {
+            return Err(overflow(
+                &[x_train, x_val],
+                &input_mean,
+                &input_scale,
+                max_degree,
+            ));
+        }
+        let mut feature_mean = Vec::with_capacity(p);
+        let mut feature_scale = Vec::with_capacity(p);
+        for j in 0..p {
+            let (m, s) = standardization(f_train.column(j).iter().copied(), n);
+            let scale = s.unwrap_or(1.0);
+            feature_mean.push(m);
+            feature_scale.push(scale);
+            match s {
+                // A constant feature (z² of a two-valued input) carries nothing; exact zeros give it a
+                // zero coefficient instead of one fitted to rounding noise.
+                None => f_train.column_mut(j).fill(0.0),
+                Some(_) => f_train.column_mut(j).apply(|v| *v = (*v - m) / scale),
+            }
+            f_val.column_mut(j).apply(|v| *v = (*v - m) / scale);
+        }
+        let g_train = f_train.tr_mul(&f_train);
+        let g_val = f_val.tr_mul(&f_val);
+        Ok(Design {
+            n_cand: c,
+            max_degree,
+            cross,
+            input_mean,
+            input_scale,
+            usable,
+            feature_mean,
+            feature_scale,
+            f_train,
+            f_val,
+            g_train,
+            g_val,
+        })
+    }
+
+    /// Validation residuals `y_val − ŷ` of a fitted structure; only the few structures that compete for the
+    /// final choice need them.
+    pub(super) fn val_residuals(
+        &self,
+        target: &Target,
+        inputs: &[usize],
+        degree: usize,
+        w: &DVector<f64>,
+    ) -> Vec<f64> {
+        let idx = self.feature_indices(inputs, degree);
+        (0..self.f_val.nrows())
+            .map(|r| {
+                target.r[r]
+                    - idx
+                        .iter()
+                        .zip(w.iter())
+                        .map(|(&j, w)| self.f_val[(r, j)] * w)
+                        .sum::<f64>()
+            })
+            .collect()
+    }
+
+    /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.
+    pub(super) fn feature_indices(&self, inputs: &[usize], degree: usize) -> Vec<usize> {
+        let mut idx: Vec<usize> = inputs
+            .iter()
+            .flat_map(|&k| (0..degree).map(move |d| k * self.max_degree + d))
+            .collect();
+        if self.cross && degree >= 2 {
+            let c = self.n_cand;
+            for (i, &a) in inputs.iter().enumerate() {
+                for &b in &inputs[i + 1..] {
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    idx.push(c * self.max_degree + lo * c - lo * (lo + 1) / 2 + (hi - lo - 1));
+                }
+            }
+        }
+        idx
+    }
+
+    /// The usable candidates in rank order of |Pearson r| with the target on training data (ties by index),
+    /// those with |r| ≥ `min_correlation` (at least the best, at most `max_inputs`; 0: no limit).
+    pub(super) fn ranked_inputs(
+        &self,
+        target: &Target,
+        min_correlation: f64,
+        max_inputs: usize,
+    ) -> Vec<usize> {
+        let mut ranked: Vec<(usize, f64)> = (0..self.n_cand)
+            .filter(|&c| self.usable[c])
+            .map(|c| {
+                let j = c * self.max_degree;
+                let denom = (self.g_train[(j, j)] * target.yy).sqrt();
+                (
+                    c,
+                    if denom > 0.0 {
+                        (target.b[j] / denom).abs()
+                    } else {
+                        0.0
+                    },
+                )
+            })
+            .collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        let limit = if max_inputs == 0 {
+            usize::MAX
+        } else {
+            max_inputs
+        };
+        ranked
+            .iter()
+            .enumerate()
+            .take_while(|(i, (_, r))| *i == 0 || *r >= min_correlation)
+            .take(limit)
+            .map(|(_, (c, _))| *c)
+            .collect()
+    }
+}
+
+/// The target-dependent sums: `Fᵀ(y − ȳ)` on training data and, with `r = y_val − ȳ` (the residual of the
+/// intercept alone), `Fᵥᵀr` and `rᵀr`.
+pub(super) struct Target {
+    mean: f64,
+    pub(super) constant: bool,
+    yy: f64,
+    b: DVector<f64>,
+    cv: DVector<f64>,
+    r: DVector<f64>,
+    pub(super) rr: f64,
+    sst_val: f64,
+    tol_val: f64,
+}
+
+impl Target {
+    pub(super) fn new(design: &Design, y: &[f64], y_val: &[f64]) -> Target {
+        let n = y.len();
+        let (mean, sd) = standardization(y.iter().copied(), n);
+        let yc = DVector::from_iterator(n, y.iter().map(|v| v - mean));
+        let r = DVector::from_iterator(y_val.len(), y_val.iter().map(|v| v - mean));
+        let val_mean = y_val.iter().sum::<f64>() / y_val.len() as f64;
+        Target {
+            mean,
+            constant: sd.is_none(),
+            yy: yc.norm_squared(),
+            b: design.f_train.tr_mul(&yc),
+            cv: design.f_val.tr_mul(&r),
+            rr: r.norm_squared(),
+            r,
+            sst_val: y_val.iter().map(|v| (v - val_mean).powi(2)).sum(),
+            tol_val: zero_sum_tol(y_val),
+        }
+    }
+
+    fn r2(&self, sse: f64) -> f64 {
+        r2_from_sums(sse, self.sst_val, self.tol_val)
+    }
+}
+
+/// The Gram sub-blocks of one (inputs, degree) structure, reused across α.
+pub(super) struct Block {
+    g: DMatrix<f64>,
+    gv: DMatrix<f64>,
+    b: DVector<f64>,
+    cv: DVector<f64>,
+}
+
+impl Block {
+    pub(super) fn new(design: &Design, target: &Target, idx: &[usize]) -> Block {
+        let n = idx.len();
+        Block {
+            g: DMatrix::from_fn(n, n, |a, b| design.g_train[(idx[a], idx[b])]),
+            gv: DMatrix::from_fn(n, n, |a, b| design.g_val[(idx[a], idx[b])]),
+            b: DVector::from_fn(n, |a, _| target.b[idx[a]]),
+            cv: DVector::from_fn(n, |a, _| target.cv[idx[a]]),
+        }
+    }
+
+    /// Ridge coefficients and the validation SSE they give.
+    pub(super) fn solve(&self, target: &Target, alpha: f64) -> (DVector<f64>, f64) {
+        let n = self.g.nrows();
+        let shifted = || {
+            let mut a = self.g.clone();
+            for i in 0..n {
+                a[(i, i)] += alpha;
+            }
+            a
+        };
+        let w = match shifted().cholesky() {
+            Some(ch) => ch.solve(&self.b),
+            // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
+            // the limit of ridge as α → 0.
+            None => {
+                // A Gram matrix that is not finite gives NaN coefficients and a NaN score, which the
+                // search never chooses, rather than an SVD that never returns.
+                match numeric::svd(shifted(), true, true, "ridge") {
+                    Ok(svd) => {
+                        let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
+                        svd.solve(&self.b, eps)
+                            .unwrap_or_else(|_| DVector::zeros(n))
+                    }
+                    Err(_) => DVector::from_element(n, f64::NAN),
+                }
+            }
+        };
+        let sse = target.rr - 2.0 * w.dot(&self.cv) + w.dot(&(&self.gv * &w));
+        (w, sse.max(0.0))
+    }
+}
+
+/// The polynomial features of `x`'s rows, standardized inputs to the powers 1..=`max_degree` (column
+/// `c·D + p − 1`), then with `cross` the products of input pairs; `p` columns in all.
+fn raw_features(
+    x: &DMatrix<f64>,
+    input_mean: &[f64],
+    input_scale: &[f64],
+    max_degree: usize,
+    cross: bool,
+    p: usize,
+) -> DMatrix<f64> {
+    let c = input_mean.len();
+    let rows = x.nrows();
+    let mut f = DMatrix::<f64>::zeros(rows, p);
+    for r in 0..rows {
+        let z = |k: usize| (x[(r, k)] - input_mean[k]) / input_scale[k];
+        for k in 0..c {
+            let zk = z(k);
+            let mut v = zk;
+            for d in 0..max_degree {
+                f[(r, k * max_degree + d)] = v;
+                v *= zk;
+            }
+        }
+        if cross {
+            let mut col = c * max_degree;
+            for a in 0..c {
+                for b in a + 1..c {
+                    f[(r, col)] = z(a) * z(b);
+                    col += 1;
+                }
+            }
+        }
+    }
+    f
+}
+
+/// The error for features that overflow: the input value furthest from its training mean, in standard
+/// deviations, over the rows of `xs`.
+fn overflow(
+    xs: &[&DMatrix<f64>],
+    input_mean: &[f64],
+    input_scale: &[f64],
+    max_degree: usize,
+) -> Error {
+    let c = input_mean.len();
+    // The cause is an input far from the others (an outlier, a wrong unit), not the degree.
+    let (mut worst, mut at) = (0.0_f64, 0);
+    for x in xs {
+        for r in 0..x.nrows() {
+            for k in 0..c {
+                let z = ((x[(r, k)] - input_mean[k]) / input_scale[k]).abs();
+                if z.is_nan() || z > worst {
+                    (worst, at) = (z, k);
+                }
+            }
+        }
+    }
+    Error::Invalid(format!(
+        "regression: polynomial features of degree {max_degree} overflow: a value of input {} lies \
+         {worst:.1e} standard deviations from its training mean (an outlier or a wrong unit in the data)",
+        at + 1
+    ))
+}
+
+/// The model of one structure: its coefficients `w` (on the standardized features) with the design's
+/// standardization and the target's mean.
+pub(super) fn build(
+    design: &Design,
+    target: &Target,
+    inputs: &[usize],
+    degree: usize,
+    alpha: f64,
+    w: &DVector<f64>,
+    sse: f64,
+) -> RidgeModel {
+    let idx = design.feature_indices(inputs, degree);
+    RidgeModel {
+        inputs: inputs.to_vec(),
+        degree,
+        alpha,
+        cross_terms: design.cross && degree >= 2 && inputs.len() >= 2,
+        input_mean: inputs.iter().map(|&c| design.input_mean[c]).collect(),
+        input_scale: inputs.iter().map(|&c| design.input_scale[c]).collect(),
+        feature_mean: idx.iter().map(|&j| design.feature_mean[j]).collect(),
+        feature_scale: idx.iter().map(|&j| design.feature_scale[j]).collect(),
+        coef: w.iter().copied().collect(),
+        intercept: target.mean,
+        validation_r2: target.r2(sse),
+    }
+}
