@@ -6,7 +6,8 @@
 //! 1. `rigid` (point-set registration by SVD), `regression/` (ridge models and their selection),
 //!    `error_model` (the paper's error parameters on the DH chain) — no other file of calib;
 //! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
-//!    — `rigid`;
+//!    — `rigid`; `correction` (ridge models of what a reference prediction leaves: `ResidualCorrection`)
+//!    — `tracker_frame`, `regression`;
 //! 3. `method` (the `Fitted` trait, `MethodInfo` — what a method is —, `Basis`, `FitContext`) — `tracker_frame`,
 //!    `regression`, `error_model`; it knows no method;
 //! 4. the methods, one file (or directory) each: `paper` (`nominal` and the paper's three), `kinematic/`
@@ -32,6 +33,7 @@
 //! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base
 //! (`report::summary`), the model a campaign is designed for (`design::model`).
 pub mod clock;
+pub mod correction;
 pub mod domain;
 pub mod error_model;
 pub mod kinematic;
