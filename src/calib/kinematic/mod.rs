@@ -50,32 +50,31 @@
 //! **Files.** `params` (the candidates in priority order and the state they overwrite), `gravity` (gravity
 //! torques on the DH chain for the compliances), `problem` (residuals and their analytic Jacobian), `solve`
 //! (Levenberg–Marquardt in whitened coordinates), `identify` (the structural set, the rank check, the
-//! identification Jacobian for design), and here the model: its fit, prediction and report.
+//! identification Jacobian for design), `fit` (the steps of the fit), and here the model: its fit, prediction
+//! and report.
 
+mod fit;
 mod gravity;
 mod identify;
 mod params;
 mod problem;
 mod solve;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use gravity::GravityModel;
-use identify::{Identifiability, determined, identifiability, standard_deviations, structural_set};
 pub use identify::{Identification, MIN_NOISE_M, Undetermined};
 use params::State;
 pub use params::{Param, candidates};
-use problem::{Point, Problem};
+use problem::Problem;
 pub use solve::Termination;
-use solve::minimize;
 
 use super::domain::Domain;
 use super::error_model::{ErrorFrames, FrameErrors};
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
-use super::rigid::centre;
-use super::tracker_frame::{Observation, Registration, TrackerFrame, fit_tracker_frame};
+use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::plausible;
@@ -179,27 +178,8 @@ impl KinematicModel {
         options: &KinematicOptions,
     ) -> Result<KinematicModel> {
         let method = if elastic { &ELASTIC } else { &KINEMATIC };
-        if train.is_empty() {
-            return Err(Error::Invalid(format!("{method}: no training points")));
-        }
         let dh = ctx.dh;
-        let n = dh.dof();
-        for data in [train, val] {
-            let bad = data.q.iter().zip(&data.measured).position(|(q, m)| {
-                !(q.len() == n
-                    && q.iter().all(|v| v.is_finite())
-                    && m.iter().all(|p| p.iter().all(|v| v.is_finite())))
-            });
-            if let Some(i) = bad {
-                return Err(Error::Data {
-                    origin: data.origin.clone(),
-                    message: format!(
-                        "{method}: point {} has a non-finite measurement or not {n} finite joint angles",
-                        data.point_ids.get(i).map_or("?", |s| s.as_str())
-                    ),
-                });
-            }
-        }
+        fit::check_points(method, dh.dof(), train, val)?;
         let registration = Registration::fit(dh, train, val)?;
         let gravity = if elastic {
             Some(GravityModel::new(ctx.chain, dh, ctx.payload)?)
@@ -207,30 +187,8 @@ impl KinematicModel {
             None
         };
         let length = registration.orientation_length();
-        let to_points = |obs: Vec<Observation>| -> Vec<Point> {
-            obs.into_iter()
-                .map(|o| Point {
-                    tau: gravity
-                        .as_ref()
-                        .map_or_else(Vec::new, |g| g.torques(dh, &o.q)),
-                    q: o.q,
-                    y: o.position,
-                    orientation: o.orientation,
-                })
-                .collect()
-        };
-        let base = State::initial(n, registration.frame.mounting);
-        // Data in the base frame has no tracker frame to fit: the base's own errors take its place.
-        let all: Vec<Param> = candidates(n, elastic)
-            .into_iter()
-            .filter(|p| {
-                !(registration.base_frame
-                    && matches!(p, Param::TrackerRotation(_) | Param::TrackerTranslation(_)))
-            })
-            .collect();
-
-        // The structurally identifiable set, from configurations that do not depend on the data.
-        let (lower, upper) = ctx.limits();
+        let base = State::initial(dh.dof(), registration.frame.mounting);
+        let all = fit::candidates_to_fit(dh.dof(), elastic, registration.base_frame);
         let mut probe = Problem {
             dh,
             points: Vec::new(),
@@ -238,100 +196,34 @@ impl KinematicModel {
             base: base.clone(),
             params: all.clone(),
         };
-        let structural = structural_set(&probe, &lower, &upper, &all, gravity.as_ref());
-        let dropped: Vec<Param> = all
-            .iter()
-            .copied()
-            .filter(|p| !structural.contains(p))
-            .collect();
+        let (structural, dropped) = fit::structural(&probe, ctx, &all, gravity.as_ref());
 
         // What the training data determine of it, at the noise the nominal model leaves: an upper bound of
         // what the fit will leave, so what is kept is determined whatever the fit explains. (Judging again at
         // the fitted residual was tried: it lets parameters of a near-axis reflector back in at some draws and
         // sizes, and the fit fails again.) The rest stays nominal and is reported.
-        probe.points = to_points(registration.observe(train)?);
-        probe.params = structural.clone();
-        let x_struct: Vec<f64> = structural.iter().map(|&p| base.get(p)).collect();
-        let j_struct = probe
-            .evaluate(&x_struct, true)
-            .1
-            .expect("jacobian requested");
-        // The noise is what the nominal model leaves after a rigid registration. Data in the base frame are
-        // registered by the identity, whose residual also holds the base's own placement error — which this fit
-        // identifies; judged at that residual, parameters were dropped that a tracker-frame fit keeps
-        // (`kinematic` 0.208, now 0.190, against 0.134 mm in the tracker frame on the same points).
-        let nominal_rms = if registration.base_frame {
-            let measured: Vec<_> = train
-                .measured
-                .iter()
-                .chain(&val.measured)
-                .map(|m| centre(m))
-                .collect();
-            let flanges: Vec<_> = train
-                .q
-                .iter()
-                .chain(&val.q)
-                .map(|q| dh.flange_pose(q))
-                .collect();
-            fit_tracker_frame(&measured, &flanges, &registration.frame.mounting)?.rms
-        } else {
-            registration.frame.rms
-        };
-        let sigma = (nominal_rms / 3f64.sqrt()).max(MIN_NOISE_M);
-        // Compliances are non-negative: a fit that pulls one below zero holds it at zero (the bound) and is
-        // repeated without it, one at a time from the most negative — an active-set bounded least squares.
-        let mut at_bound: Vec<Undetermined> = Vec::new();
-        let (kept, mut undetermined, id, minimum, values, std) = loop {
-            let (mut kept, mut undetermined) =
-                determined(&j_struct, &structural, sigma, probe.points.len());
-            let bound = |p: &Param| at_bound.iter().any(|u| u.parameter == p.name());
-            kept.retain(|p| !bound(p));
-            let (id, minimum, values, std) = solve_kept(&mut probe, &base, &kept, options, method)?;
-            let negative = kept
-                .iter()
-                .zip(&values)
-                .enumerate()
-                .filter(|(_, (p, v))| p.is_compliance() && **v < 0.0)
-                .min_by(|a, b| a.1.1.total_cmp(b.1.1))
-                .map(|(i, _)| i);
-            if let Some(i) = negative {
-                let sd = std.get(i).copied();
-                at_bound.push(Undetermined {
-                    parameter: kept[i].name(),
-                    std: sd,
-                    plausible: identify::PLAUSIBLE_COMPLIANCE,
-                    reason: format!(
-                        "the data pull it below zero ({:.2e}{} rad/Nm), which no joint is; held at 0, the bound",
-                        values[i],
-                        sd.map_or(String::new(), |s| format!(" ± {s:.1e}"))
-                    ),
-                });
-                continue;
-            }
-            undetermined.retain(|u| !at_bound.iter().any(|b| b.parameter == u.parameter));
-            break (kept, undetermined, id, minimum, values, std);
-        };
+        probe.points = fit::points(dh, gravity.as_ref(), registration.observe(train)?);
+        let j_struct = fit::jacobian_at_base(&mut probe, &base, &structural);
+        let sigma = fit::nominal_noise(dh, &registration, train, val)?;
+        let solution = fit::solve_within_bounds(
+            &mut probe,
+            &base,
+            &j_struct,
+            &structural,
+            sigma,
+            options.max_evaluations,
+            method,
+        )?;
+        let mut undetermined = solution.undetermined;
         undetermined.extend(
-            structurally_dropped(&dropped)
+            fit::structurally_dropped(&dropped)
                 .into_iter()
                 .filter(|u| u.parameter.starts_with('c')),
         );
-        undetermined.extend(at_bound);
-        let state = State::with(&base, &kept, &values);
-        let rms = |points: &[Point]| -> f64 {
-            let sum: f64 = points
-                .iter()
-                .map(|pt| {
-                    let qd = state.deflected(&pt.q, &pt.tau);
-                    let p = ErrorFrames::new(dh, &qd, &state.errors).flange * state.mount;
-                    let v = UnitQuaternion::from_scaled_axis(state.rho) * pt.y.coords + state.t;
-                    (p.coords - v).norm_squared()
-                })
-                .sum();
-            (sum / points.len() as f64).sqrt()
-        };
-        let train_rms = rms(&probe.points);
-        if !train_rms.is_finite() || values.iter().any(|v| !v.is_finite()) {
+        undetermined.extend(solution.at_bound);
+        let state = State::with(&base, &solution.kept, &solution.values);
+        let train_rms = fit::rms(dh, &state, &probe.points);
+        if !train_rms.is_finite() || solution.values.iter().any(|v| !v.is_finite()) {
             return Err(Error::Invalid(format!(
                 "{method}: the fit produced non-finite parameters"
             )));
@@ -339,45 +231,31 @@ impl KinematicModel {
         let val_points = if val.is_empty() {
             Vec::new()
         } else {
-            to_points(registration.observe(val)?)
+            fit::points(dh, gravity.as_ref(), registration.observe(val)?)
         };
-        let validation_rms = (!val_points.is_empty()).then(|| rms(&val_points));
-        let initial = registration.frame.tracker_to_base;
-        let refined = Isometry3::from_parts(
-            Translation3::from(state.t),
-            UnitQuaternion::from_scaled_axis(state.rho),
-        ) * initial;
+        let validation_rms = (!val_points.is_empty()).then(|| fit::rms(dh, &state, &val_points));
+        let evaluations = solution.minimum.evaluations;
         Ok(KinematicModel {
             method,
             basis: Basis {
                 joint_names: train.joint_names.clone(),
                 dh: dh.clone(),
-                registration: Registration {
-                    frame: TrackerFrame {
-                        tracker_to_base: refined,
-                        mounting: state.mount,
-                        rms: train_rms,
-                        evaluations: minimum.evaluations,
-                    },
-                    nest: registration.nest,
-                    probe_rotation: registration.probe_rotation,
-                    base_frame: registration.base_frame,
-                },
+                registration: fit::refined(registration, &state, train_rms, evaluations),
                 domain: Domain::of(train, val),
             },
             errors: state.errors.clone(),
             compliance: elastic.then(|| state.compliance.clone()),
             gravity,
             orientation_length_m: length,
-            kept,
-            values,
-            std,
+            kept: solution.kept,
+            values: solution.values,
+            std: solution.std,
             dropped,
             undetermined,
-            rank: id.rank,
-            condition_number: id.condition,
-            evaluations: minimum.evaluations,
-            termination: minimum.termination,
+            rank: solution.id.rank,
+            condition_number: solution.id.condition,
+            evaluations,
+            termination: solution.minimum.termination,
             train_rms_m: train_rms,
             validation_rms_m: validation_rms,
         })
@@ -531,80 +409,6 @@ impl KinematicModel {
         };
         ErrorFrames::new(&self.basis.dh, &qd, &self.errors).flange
     }
-}
-
-/// Levenberg–Marquardt on `kept` from the base state: the rank check first (a rank below the set's size is
-/// refused, naming the least determined), then the fit, its values and their standard deviations.
-fn solve_kept(
-    probe: &mut Problem,
-    base: &State,
-    kept: &[Param],
-    options: &KinematicOptions,
-    method: &MethodInfo,
-) -> Result<(Identifiability, solve::Minimum, Vec<f64>, Vec<f64>)> {
-    probe.params = kept.to_vec();
-    let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
-    let (_, j0) = probe.evaluate(&x0, true);
-    let id = identifiability(&j0.expect("jacobian requested"), kept);
-    if id.rank < kept.len() {
-        let weakest = if id.weakest.is_empty() {
-            String::new()
-        } else {
-            format!("; least determined: {}", id.weakest.join(", "))
-        };
-        return Err(Error::Invalid(format!(
-            "{method}: the training points do not identify the model: rank {} of {} \
-             (condition number {:.1e}){weakest}; measure more points and vary every joint",
-            id.rank,
-            kept.len(),
-            id.condition
-        )));
-    }
-    let k = kept.len();
-    let whitening = id
-        .whitening
-        .clone()
-        .unwrap_or_else(|| DMatrix::identity(k, k));
-    let minimum = minimize(
-        probe,
-        &DVector::from_vec(x0),
-        &whitening,
-        options.max_evaluations.max(2),
-    )
-    .map_err(|why| {
-        Error::Invalid(format!(
-            "{method}: Levenberg–Marquardt did not converge ({why}); the data may be \
-             inconsistent with a constant-error model"
-        ))
-    })?;
-    let values: Vec<f64> = minimum.x.iter().copied().collect();
-    let (r, j) = probe.evaluate(&values, true);
-    let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
-    Ok((id, minimum, values, std))
-}
-
-/// What the structural analysis drops, in words: a compliance because gravity (and the declared payload)
-/// never load its joint within the limits, a frame error because at no configuration does it move the
-/// measured point other than as parameters kept before it do.
-fn structurally_dropped(dropped: &[Param]) -> Vec<Undetermined> {
-    dropped
-        .iter()
-        .map(|p| Undetermined {
-            parameter: p.name(),
-            std: None,
-            plausible: identify::plausible_size(*p).unwrap_or(0.0),
-            reason: if p.is_compliance() {
-                "gravity and the declared payload load this joint nowhere within the joint limits (its axis \
-                 stays vertical, or the masses it carries sit on it), so its compliance deflects nothing the \
-                 tracker could measure; held at 0"
-            } else {
-                "at every configuration within the joint limits it moves the measured point only as parameters \
-                 kept before it do, or not at all (e.g. a rotation about the axis the reflector sits on); \
-                 structurally redundant, held at 0"
-            }
-            .into(),
-        })
-        .collect()
 }
 
 impl Fitted for KinematicModel {
