@@ -20,7 +20,7 @@ use super::error_model::{
     select_params,
 };
 use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
-use super::regression::{RidgeModel, fit_all, r2};
+use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -206,6 +206,48 @@ impl PaperModel {
         train: &Dataset,
         val: &Dataset,
     ) -> Result<PaperModel> {
+        let mut model = PaperModel::registered(kind, ctx, train, val)?;
+        let Some(kind) = kind else {
+            return Ok(model);
+        };
+        let (lower, upper) = ctx.limits();
+        let selection = select_params(ctx.dh, &lower, &upper, kind);
+        check_identifiable(kind, train.len(), selection.position.len())?;
+        let orientation_params = if model.basis.registration.measures_orientation() {
+            selection.orientation_only.clone()
+        } else {
+            Vec::new()
+        };
+        let (obs_train, obs_val) = (
+            model.basis.registration.observe(train)?,
+            model.basis.registration.observe(val)?,
+        );
+        let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
+        let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
+        let (x_train, x_val) = (
+            model.candidate_matrix(&obs_train),
+            model.candidate_matrix(&obs_val),
+        );
+        let regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
+            regress(params, &x_train, &x_val, y_train, y_val, &ctx.regression)
+        };
+        model.position = regress(&selection.position, &id_train.position, &id_val.position)?;
+        model.orientation = regress(
+            &orientation_params,
+            &id_train.orientation,
+            &id_val.orientation,
+        )?;
+        Ok(model)
+    }
+
+    /// The `nominal` model: the registered tracker frame and mounting, the candidates of the regressions and
+    /// the extra inputs' defaults, with no parameter model yet.
+    fn registered(
+        kind: Option<ErrorModelKind>,
+        ctx: &FitContext,
+        train: &Dataset,
+        val: &Dataset,
+    ) -> Result<PaperModel> {
         if train.is_empty() || val.is_empty() {
             return Err(Error::Invalid(format!(
                 "{} training and {} validation points: both sets must be non-empty",
@@ -225,7 +267,7 @@ impl PaperModel {
         }
         // Training means, and zero for the motion (the arm at rest): what a prediction takes unless told.
         let extra_input_means = train.input_defaults();
-        let mut model = PaperModel {
+        Ok(PaperModel {
             method: info_of(kind),
             kind,
             basis: Basis {
@@ -245,72 +287,7 @@ impl PaperModel {
             extra_input_means,
             position: Vec::new(),
             orientation: Vec::new(),
-        };
-        let Some(kind) = kind else {
-            return Ok(model);
-        };
-        let (lower, upper) = ctx.limits();
-        let selection = select_params(dh, &lower, &upper, kind);
-        // Three coordinates per point: with fewer than there are parameters not even a constant model of the
-        // parameters is determined, and the per-parameter regressions would fit noise.
-        if 3 * train.len() < selection.position.len() {
-            return Err(Error::Invalid(format!(
-                "{} training points measure {} coordinates, fewer than the {} error parameters of {}: \
-                 the model cannot be identified; measure more points or choose a smaller model",
-                train.len(),
-                3 * train.len(),
-                selection.position.len(),
-                info_of(Some(kind)).name
-            )));
-        }
-        let orientation_params = if model.basis.registration.measures_orientation() {
-            selection.orientation_only.clone()
-        } else {
-            Vec::new()
-        };
-        let (obs_train, obs_val) = (
-            model.basis.registration.observe(train)?,
-            model.basis.registration.observe(val)?,
-        );
-        let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
-        let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
-        let (x_train, x_val) = (
-            model.candidate_matrix(&obs_train),
-            model.candidate_matrix(&obs_val),
-        );
-        let regress = |params: &[ErrorParam],
-                       y_train: &[Vec<f64>],
-                       y_val: &[Vec<f64>]|
-         -> Result<Vec<ParameterModel>> {
-            if params.is_empty() {
-                return Ok(Vec::new());
-            }
-            let to_matrix =
-                |rows: &[Vec<f64>]| DMatrix::from_fn(rows.len(), params.len(), |r, c| rows[r][c]);
-            let fitted = fit_all(
-                &x_train,
-                &to_matrix(y_train),
-                &x_val,
-                &to_matrix(y_val),
-                &ctx.regression,
-            )?;
-            Ok(params
-                .iter()
-                .zip(fitted)
-                .map(|(p, m)| ParameterModel {
-                    param: *p,
-                    name: p.name(),
-                    model: m,
-                })
-                .collect())
-        };
-        model.position = regress(&selection.position, &id_train.position, &id_val.position)?;
-        model.orientation = regress(
-            &orientation_params,
-            &id_train.orientation,
-            &id_val.orientation,
-        )?;
-        Ok(model)
+        })
     }
 
     /// Eq. 13 per point: minimum-norm error parameters explaining each observation's deviation.
@@ -443,6 +420,49 @@ impl PaperModel {
             orientation,
         }
     }
+}
+
+/// Three coordinates per point: with fewer than there are parameters not even a constant model of the
+/// parameters is determined, and the per-parameter regressions would fit noise.
+fn check_identifiable(kind: ErrorModelKind, n_train: usize, n_params: usize) -> Result<()> {
+    if 3 * n_train < n_params {
+        return Err(Error::Invalid(format!(
+            "{} training points measure {} coordinates, fewer than the {} error parameters of {}: \
+             the model cannot be identified; measure more points or choose a smaller model",
+            n_train,
+            3 * n_train,
+            n_params,
+            info_of(Some(kind)).name
+        )));
+    }
+    Ok(())
+}
+
+/// One ridge model per parameter of `params`, on the candidate rows `x_train` (chosen on `x_val`); the rows
+/// of `y_train` and `y_val` hold the parameters' identified values per point.
+fn regress(
+    params: &[ErrorParam],
+    x_train: &DMatrix<f64>,
+    x_val: &DMatrix<f64>,
+    y_train: &[Vec<f64>],
+    y_val: &[Vec<f64>],
+    opts: &RegressionOptions,
+) -> Result<Vec<ParameterModel>> {
+    if params.is_empty() {
+        return Ok(Vec::new());
+    }
+    let to_matrix =
+        |rows: &[Vec<f64>]| DMatrix::from_fn(rows.len(), params.len(), |r, c| rows[r][c]);
+    let fitted = fit_all(x_train, &to_matrix(y_train), x_val, &to_matrix(y_val), opts)?;
+    Ok(params
+        .iter()
+        .zip(fitted)
+        .map(|(p, m)| ParameterModel {
+            param: *p,
+            name: p.name(),
+            model: m,
+        })
+        .collect())
 }
 
 /// A non-finite Jacobian or deviation (a configuration far outside the robot's range) gives NaN parameters,
