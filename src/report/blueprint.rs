@@ -5,7 +5,7 @@
 //!   left out of its query — add `world/tracker/beams` back in the view's entity list to see them), over a tab of
 //!   the summary and the legend;
 //! - right: one learning-curve plot per layout (every method a named series; the x axis is the log timeline
-//!   [`super::recording::N_TRAIN_LOG_TIMELINE`]), over one histogram view per method, before and after overlaid;
+//!   [`super::rerun_common::N_TRAIN_LOG_TIMELINE`]), over one histogram view per method, before and after overlaid;
 //! - the time panel on that log timeline, where the curves and the robot (at the detail campaign's first point)
 //!   both show; the `point` timeline walks the robot through the campaign.
 //!
@@ -33,7 +33,7 @@ use crate::robot::Chain;
 use crate::study::StudyResult;
 
 use super::aggregate::axes;
-use super::recording::{N_TRAIN_LOG_TIMELINE, sanitize};
+use super::rerun_common::{N_TRAIN_LOG_TIMELINE, sanitize};
 
 /// A view or container of the layout.
 pub enum Part {
@@ -165,7 +165,7 @@ impl Writer<'_> {
 /// Sends `layout` to `rec` as its blueprint, active and default for the application `app`; `name` (the
 /// scenario's) keys the blueprint's ids.
 pub fn send(rec: &RecordingStream, app: &'static str, name: &str, layout: &Layout) -> Result<()> {
-    use super::recording::rerun_error as err;
+    use super::rerun_common::rerun_error as err;
     let (stream, storage) = RecordingStreamBuilder::new(app)
         .recording_id(format!("calibench-{name}-blueprint"))
         .enabled(true)
@@ -239,14 +239,53 @@ pub fn eye_towards(target: Point3<f64>, from: Point3<f64>, distance: f64) -> Poi
 
 /// The layout of a study's recording (see the module documentation).
 pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
-    let a = axes(study);
-    let view = |class, name: String, origin: &str, contents: Vec<String>| Part::View {
+    let histograms = histogram_views(study);
+    let tabs = |name: &str, children: Vec<Part>| Part::Container {
+        kind: ContainerKind::Tabs,
+        name: name.into(),
+        children,
+        shares: Vec::new(),
+    };
+    let left = Part::Container {
+        kind: ContainerKind::Vertical,
+        name: "world".into(),
+        children: vec![world_view(study, chain), documents(study)],
+        shares: vec![2.0, 1.0],
+    };
+    let mut right_children = vec![tabs("learning curves", curve_views(study))];
+    if !histograms.is_empty() {
+        right_children.push(tabs("histograms", histograms));
+    }
+    let right = Part::Container {
+        kind: ContainerKind::Vertical,
+        name: "curves".into(),
+        shares: vec![1.0; right_children.len()],
+        children: right_children,
+    };
+    Layout {
+        root: Part::Container {
+            kind: ContainerKind::Horizontal,
+            name: "calibench".into(),
+            children: vec![left, right],
+            shares: vec![1.2, 1.0],
+        },
+        timeline: N_TRAIN_LOG_TIMELINE.into(),
+    }
+}
+
+/// A view without a camera of its own.
+fn view(class: &'static str, name: String, origin: &str, contents: Vec<String>) -> Part {
+    Part::View {
         class,
         name,
         origin: origin.to_string(),
         contents,
         eye: None,
-    };
+    }
+}
+
+/// The 3-D view of `world/`, without the tracker's beams.
+fn world_view(study: &StudyResult, chain: &Chain) -> Part {
     // The camera: on the first region, from the tracker's side, far enough to see the whole box.
     let eye = study.regions.first().map(|r| {
         let centre = chain.base * Point3::from(Vector3::from(r.center_m));
@@ -257,13 +296,17 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
             centre,
         )
     });
-    let world = Part::View {
+    Part::View {
         class: "3D",
         name: "robot, region, errors (world, m)".into(),
         origin: "/world".into(),
         contents: vec!["+ $origin/**".into(), "- /world/tracker/beams".into()],
         eye,
-    };
+    }
+}
+
+/// The tabs of the text documents: the summary, the legend and, with a trajectory, its legend.
+fn documents(study: &StudyResult) -> Part {
     let mut documents = vec![
         view(
             "TextDocument",
@@ -286,12 +329,17 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
             vec!["+ $origin".into()],
         ));
     }
-    let documents = Part::Container {
+    Part::Container {
         kind: ContainerKind::Tabs,
         name: "summary".into(),
         children: documents,
         shares: Vec::new(),
-    };
+    }
+}
+
+/// One learning-curve plot per (region, layout), then the tracker-time comparison if there is one.
+fn curve_views(study: &StudyResult) -> Vec<Part> {
+    let a = axes(study);
     let mut curves = Vec::new();
     for region in &a.regions {
         for d in &a.distributions {
@@ -322,7 +370,12 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
             vec!["+ $origin/**".into()],
         ));
     }
-    let histograms: Vec<Part> = study
+    curves
+}
+
+/// One bar chart per method of the detail campaign, before and after overlaid.
+fn histogram_views(study: &StudyResult) -> Vec<Part> {
+    study
         .detail
         .histograms
         .keys()
@@ -334,36 +387,5 @@ pub fn study_layout(study: &StudyResult, chain: &Chain) -> Layout {
                 vec!["+ $origin/**".into()],
             )
         })
-        .collect();
-    let tabs = |name: &str, children: Vec<Part>| Part::Container {
-        kind: ContainerKind::Tabs,
-        name: name.into(),
-        children,
-        shares: Vec::new(),
-    };
-    let left = Part::Container {
-        kind: ContainerKind::Vertical,
-        name: "world".into(),
-        children: vec![world, documents],
-        shares: vec![2.0, 1.0],
-    };
-    let mut right_children = vec![tabs("learning curves", curves)];
-    if !histograms.is_empty() {
-        right_children.push(tabs("histograms", histograms));
-    }
-    let right = Part::Container {
-        kind: ContainerKind::Vertical,
-        name: "curves".into(),
-        shares: vec![1.0; right_children.len()],
-        children: right_children,
-    };
-    Layout {
-        root: Part::Container {
-            kind: ContainerKind::Horizontal,
-            name: "calibench".into(),
-            children: vec![left, right],
-            shares: vec![1.2, 1.0],
-        },
-        timeline: N_TRAIN_LOG_TIMELINE.into(),
-    }
+        .collect()
 }

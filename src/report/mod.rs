@@ -9,6 +9,7 @@ pub mod blueprint;
 pub mod metrics;
 pub mod plots;
 pub mod recording;
+pub mod rerun_common;
 pub mod summary;
 pub mod tables;
 pub mod trajectory;

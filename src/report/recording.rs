@@ -75,18 +75,16 @@ use rerun::{
 
 use crate::error::{Error, Result};
 use crate::robot::kinematics::{Frames, forward_kinematics};
-use crate::robot::{Chain, Shape};
+use crate::robot::{Body, Chain, Shape};
 use crate::study::{DetailPoint, StudyResult};
+
+pub use super::rerun_common::{
+    N_TRAIN_LOG_TIMELINE, N_TRAIN_TIMELINE, POINT_TIMELINE, sanitize, viridis,
+};
+use super::rerun_common::{f3, nice_ceiling, p3, palette, rerun_error};
 
 /// The application id of every recording.
 pub const APPLICATION_ID: &str = "calibench";
-/// The sequence timeline of the detail campaign's points.
-pub const POINT_TIMELINE: &str = "point";
-/// The sequence timeline of the learning curves.
-pub const N_TRAIN_TIMELINE: &str = "n_train";
-/// The learning curves' log timeline: round(1000 · log10 n_train), so 2000 is 100 points and 3000 is 1000; the
-/// viewer opens on it.
-pub const N_TRAIN_LOG_TIMELINE: &str = "n_train_log";
 
 /// The position of `n` training points on [`N_TRAIN_LOG_TIMELINE`].
 pub fn log_time(n: usize) -> i64 {
@@ -164,76 +162,6 @@ pub fn arrow_factor_after(points: &[DetailPoint]) -> u64 {
     arrow_factor(&swapped)
 }
 
-/// A scenario name as one entity-path part: `[A-Za-z0-9_.-]` kept, anything else `_`.
-pub fn sanitize(name: &str) -> String {
-    let s: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    if s.is_empty() { "_".into() } else { s }
-}
-
-/// The viridis colour of `value` on a `0..=scale` axis (same unit), clamped.
-pub fn viridis(value: f64, scale: f64) -> [u8; 4] {
-    const STOPS: [[f64; 3]; 9] = [
-        [68.0, 1.0, 84.0],
-        [71.0, 44.0, 122.0],
-        [59.0, 81.0, 139.0],
-        [44.0, 113.0, 142.0],
-        [33.0, 144.0, 141.0],
-        [39.0, 173.0, 129.0],
-        [92.0, 200.0, 99.0],
-        [170.0, 220.0, 50.0],
-        [253.0, 231.0, 37.0],
-    ];
-    let t = if scale > 0.0 && value.is_finite() {
-        (value / scale).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let x = t * (STOPS.len() - 1) as f64;
-    let i = (x.floor() as usize).min(STOPS.len() - 2);
-    let f = x - i as f64;
-    let c = |k: usize| (STOPS[i][k] + f * (STOPS[i + 1][k] - STOPS[i][k])).round() as u8;
-    [c(0), c(1), c(2), 255]
-}
-
-/// The smallest 1-2-5 number ≥ `value` (and ≥ 0.001), for colour scales in mm.
-pub(super) fn nice_ceiling(value: f64) -> f64 {
-    let v = if value.is_finite() {
-        value.max(1e-3)
-    } else {
-        1e-3
-    };
-    let decade = 10f64.powi(v.log10().floor() as i32);
-    [1.0, 2.0, 5.0, 10.0]
-        .into_iter()
-        .map(|m| m * decade)
-        .find(|c| *c >= v * (1.0 - 1e-12))
-        .unwrap_or(10.0 * decade)
-}
-
-pub(super) fn rerun_error(e: impl std::fmt::Display) -> Error {
-    Error::io(
-        "campaign.rrd",
-        std::io::Error::other(format!("rerun recording: {e}")),
-    )
-}
-
-fn f3(v: &Vector3<f64>) -> [f32; 3] {
-    [v.x as f32, v.y as f32, v.z as f32]
-}
-
-pub(super) fn p3(p: &Point3<f64>) -> [f32; 3] {
-    [p.x as f32, p.y as f32, p.z as f32]
-}
-
 fn quat(iso: &Isometry3<f64>) -> Quaternion {
     let q = iso.rotation.into_inner().coords;
     Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32])
@@ -245,23 +173,6 @@ fn transform(iso: &Isometry3<f64>) -> Transform3D {
 
 fn mm(m: f64) -> f64 {
     m * 1e3
-}
-
-/// A distinct colour per series index: Tableau's ten, as the PNG plots use.
-pub(super) fn palette(i: usize) -> [u8; 4] {
-    const TAB10: [[u8; 4]; 10] = [
-        [31, 119, 180, 255],
-        [255, 127, 14, 255],
-        [44, 160, 44, 255],
-        [214, 39, 40, 255],
-        [148, 103, 189, 255],
-        [140, 86, 75, 255],
-        [227, 119, 194, 255],
-        [127, 127, 127, 255],
-        [188, 189, 34, 255],
-        [23, 190, 207, 255],
-    ];
-    TAB10[i % TAB10.len()]
 }
 
 fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &str) -> Result<()> {
@@ -327,90 +238,124 @@ fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &
 }
 
 fn log_robot(rec: &RecordingStream, study: &StudyResult, chain: &Chain) -> Result<()> {
-    let link_color = [255, 140, 0, 160];
     for (i, body) in chain.bodies.iter().enumerate() {
-        let path = format!("world/robot/link_{i}");
-        let mut cylinders = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let mut capsules = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let mut spheres = (Vec::new(), Vec::new());
-        let mut boxes = (Vec::new(), Vec::new(), Vec::new());
-        for collider in &body.colliders {
-            let o = &collider.origin;
-            match collider.shape {
-                Shape::Cylinder { radius, length } => {
-                    cylinders.0.push(length as f32);
-                    cylinders.1.push(radius as f32);
-                    cylinders.2.push(f3(&o.translation.vector));
-                    cylinders.3.push(quat(o));
-                }
-                Shape::Capsule { radius, length } => {
-                    // Rerun's capsule starts at its frame's origin and runs along +z; ours is centred.
-                    let start = o * Point3::new(0.0, 0.0, -length / 2.0);
-                    capsules.0.push(length as f32);
-                    capsules.1.push(radius as f32);
-                    capsules.2.push(p3(&start));
-                    capsules.3.push(quat(o));
-                }
-                Shape::Sphere { radius } => {
-                    spheres.0.push(f3(&o.translation.vector));
-                    spheres.1.push(radius as f32);
-                }
-                Shape::Cuboid { half_extents } => {
-                    boxes.0.push(f3(&o.translation.vector));
-                    boxes.1.push(half_extents.map(|h| h as f32));
-                    boxes.2.push(quat(o));
-                }
-            }
-        }
-        if !cylinders.0.is_empty() {
-            let n = cylinders.0.len();
-            rec.log_static(
-                format!("{path}/cylinders"),
-                &Cylinders3D::from_lengths_and_radii(cylinders.0, cylinders.1)
-                    .with_centers(cylinders.2)
-                    .with_quaternions(cylinders.3)
-                    .with_colors(vec![link_color; n])
-                    .with_fill_mode(FillMode::Solid),
-            )
-            .map_err(rerun_error)?;
-        }
-        if !capsules.0.is_empty() {
-            let n = capsules.0.len();
-            rec.log_static(
-                format!("{path}/capsules"),
-                &Capsules3D::from_lengths_and_radii(capsules.0, capsules.1)
-                    .with_translations(capsules.2)
-                    .with_quaternions(capsules.3)
-                    .with_colors(vec![link_color; n])
-                    .with_fill_mode(FillMode::Solid),
-            )
-            .map_err(rerun_error)?;
-        }
-        if !spheres.0.is_empty() {
-            let n = spheres.0.len();
-            rec.log_static(
-                format!("{path}/spheres"),
-                &Ellipsoids3D::from_centers_and_radii(spheres.0, spheres.1)
-                    .with_colors(vec![link_color; n])
-                    .with_fill_mode(FillMode::Solid),
-            )
-            .map_err(rerun_error)?;
-        }
-        if !boxes.0.is_empty() {
-            let n = boxes.0.len();
-            rec.log_static(
-                format!("{path}/boxes"),
-                &Boxes3D::from_centers_and_half_sizes(boxes.0, boxes.1)
-                    .with_quaternions(boxes.2)
-                    .with_colors(vec![link_color; n])
-                    .with_fill_mode(FillMode::Solid),
-            )
-            .map_err(rerun_error)?;
-        }
+        log_colliders(rec, &format!("world/robot/link_{i}"), colliders(body))?;
     }
     rec.log_static("world/robot/flange", &TransformAxes3D::new(0.1f32))
         .map_err(rerun_error)?;
+    log_poses(rec, study, chain)
+}
 
+/// A body's colliders, in its frame, grouped by rerun archetype: cylinders and capsules (lengths, radii,
+/// centres or starts, rotations), spheres (centres, radii), boxes (centres, half sizes, rotations).
+struct Colliders {
+    cylinders: (Vec<f32>, Vec<f32>, Vec<[f32; 3]>, Vec<Quaternion>),
+    capsules: (Vec<f32>, Vec<f32>, Vec<[f32; 3]>, Vec<Quaternion>),
+    spheres: (Vec<[f32; 3]>, Vec<f32>),
+    boxes: (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<Quaternion>),
+}
+
+fn colliders(body: &Body) -> Colliders {
+    let mut cylinders = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut capsules = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut spheres = (Vec::new(), Vec::new());
+    let mut boxes = (Vec::new(), Vec::new(), Vec::new());
+    for collider in &body.colliders {
+        let o = &collider.origin;
+        match collider.shape {
+            Shape::Cylinder { radius, length } => {
+                cylinders.0.push(length as f32);
+                cylinders.1.push(radius as f32);
+                cylinders.2.push(f3(&o.translation.vector));
+                cylinders.3.push(quat(o));
+            }
+            Shape::Capsule { radius, length } => {
+                // Rerun's capsule starts at its frame's origin and runs along +z; ours is centred.
+                let start = o * Point3::new(0.0, 0.0, -length / 2.0);
+                capsules.0.push(length as f32);
+                capsules.1.push(radius as f32);
+                capsules.2.push(p3(&start));
+                capsules.3.push(quat(o));
+            }
+            Shape::Sphere { radius } => {
+                spheres.0.push(f3(&o.translation.vector));
+                spheres.1.push(radius as f32);
+            }
+            Shape::Cuboid { half_extents } => {
+                boxes.0.push(f3(&o.translation.vector));
+                boxes.1.push(half_extents.map(|h| h as f32));
+                boxes.2.push(quat(o));
+            }
+        }
+    }
+    Colliders {
+        cylinders,
+        capsules,
+        spheres,
+        boxes,
+    }
+}
+
+/// The static shapes of one link, under `path`.
+fn log_colliders(rec: &RecordingStream, path: &str, shapes: Colliders) -> Result<()> {
+    let link_color = [255, 140, 0, 160];
+    let Colliders {
+        cylinders,
+        capsules,
+        spheres,
+        boxes,
+    } = shapes;
+    if !cylinders.0.is_empty() {
+        let n = cylinders.0.len();
+        rec.log_static(
+            format!("{path}/cylinders"),
+            &Cylinders3D::from_lengths_and_radii(cylinders.0, cylinders.1)
+                .with_centers(cylinders.2)
+                .with_quaternions(cylinders.3)
+                .with_colors(vec![link_color; n])
+                .with_fill_mode(FillMode::Solid),
+        )
+        .map_err(rerun_error)?;
+    }
+    if !capsules.0.is_empty() {
+        let n = capsules.0.len();
+        rec.log_static(
+            format!("{path}/capsules"),
+            &Capsules3D::from_lengths_and_radii(capsules.0, capsules.1)
+                .with_translations(capsules.2)
+                .with_quaternions(capsules.3)
+                .with_colors(vec![link_color; n])
+                .with_fill_mode(FillMode::Solid),
+        )
+        .map_err(rerun_error)?;
+    }
+    if !spheres.0.is_empty() {
+        let n = spheres.0.len();
+        rec.log_static(
+            format!("{path}/spheres"),
+            &Ellipsoids3D::from_centers_and_radii(spheres.0, spheres.1)
+                .with_colors(vec![link_color; n])
+                .with_fill_mode(FillMode::Solid),
+        )
+        .map_err(rerun_error)?;
+    }
+    if !boxes.0.is_empty() {
+        let n = boxes.0.len();
+        rec.log_static(
+            format!("{path}/boxes"),
+            &Boxes3D::from_centers_and_half_sizes(boxes.0, boxes.1)
+                .with_quaternions(boxes.2)
+                .with_colors(vec![link_color; n])
+                .with_fill_mode(FillMode::Solid),
+        )
+        .map_err(rerun_error)?;
+    }
+    Ok(())
+}
+
+/// The robot at every detail point on the `point` timeline (and at the first on the curves' timelines), its
+/// skeleton, its true flange and the tracker's beam to the point.
+fn log_poses(rec: &RecordingStream, study: &StudyResult, chain: &Chain) -> Result<()> {
     let mut frames = Frames::new(chain);
     let tracker = &study.detail.tracker;
     for (k, point) in study.detail.points.iter().enumerate() {

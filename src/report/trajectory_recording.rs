@@ -4,7 +4,7 @@
 
 use rerun::{LineStrips3D, Points3D, RecordingStream, Scalars, SeriesLines, TextDocument};
 
-use super::recording::{nice_ceiling, p3, palette, rerun_error, sanitize, viridis};
+use super::rerun_common::{nice_ceiling, p3, palette, rerun_error, sanitize, viridis};
 use super::trajectory::comparison;
 use crate::error::Result;
 use crate::study::StudyResult;
