@@ -2,7 +2,8 @@
 //! from a trajectory campaign, and the path's timing against the joint limits.
 
 use calibench::calib::clock;
-use calibench::campaign::trajectory::{self, Path, TrajectoryConfig};
+use calibench::campaign::TrajectoryConfig;
+use calibench::campaign::trajectory::{self, Path};
 use calibench::measurements::as_dataset;
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;

@@ -6,18 +6,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::distribution::DistributionKind;
-use super::trajectory::TrajectoryConfig;
-use crate::robot::collision::Obstacle;
 
 /// The most points a region may ask for. The paper measured 2 335 and the real UR10 series a few thousand;
 /// a hundred thousand is forty times that, and with up to 50 candidate targets planned per point it is
 /// already millions of inverse-kinematics solves. Without a cap, `points = 100000000` grew memory
 /// without end.
 pub const MAX_REGION_POINTS: usize = 100_000;
-
-/// The largest candidate pool of a model-based layout, on the same grounds (every candidate is planned and
-/// its identification Jacobian kept).
-pub const MAX_POOL: usize = 100_000;
 
 fn default_distribution() -> DistributionKind {
     DistributionKind::Uniform
@@ -119,152 +113,6 @@ impl RegionConfig {
     pub fn target(&self, unit: &[f64; 3], rng: &mut ChaCha8Rng) -> Isometry3<f64> {
         let p = self.point_at(unit);
         Isometry3::from_parts(Translation3::from(p.coords), self.sample_rotation(rng))
-    }
-}
-
-fn default_limit_margin() -> f64 {
-    2.0
-}
-
-/// How the arm is posed for a campaign, and what stands in its way.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct CampaignConfig {
-    /// The posture inverse kinematics starts from and is drawn toward in the null space (deg, per joint).
-    /// It fixes the arm's branch (elbow up or down, wrist flip) for the whole campaign.
-    pub posture_deg: Vec<f64>,
-    /// Per-point random change of the posture target (deg, uniform ±): varies the redundancy (the iiwa's
-    /// elbow) within the branch. 0 keeps one redundancy resolution for the whole campaign.
-    #[serde(default)]
-    pub posture_spread_deg: f64,
-    /// Solutions closer than this to a joint limit are rejected (deg).
-    #[serde(default = "default_limit_margin")]
-    pub limit_margin_deg: f64,
-    /// Boxes in the scene the arm must not touch (a table, fixtures), base frame.
-    #[serde(default)]
-    pub obstacles: Vec<Obstacle>,
-    /// How model-based layouts (`d-optimal`) build their candidate pool and choose from it.
-    #[serde(default)]
-    pub selection: SelectionConfig,
-    /// `[campaign.trajectory]`: measure the planned targets on the fly, along one smooth path, instead of
-    /// stopping at each ([`super::trajectory`]).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub trajectory: Option<TrajectoryConfig>,
-}
-
-/// The candidate pool and the model of a model-based layout. The pool is a uniform layout of
-/// `clamp(pool_factor · N, pool_min, pool_max)` targets for N points, planned and measured like any campaign
-/// point; the feasible ones are the candidates.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct SelectionConfig {
-    /// The method whose parameters the points must determine (`kinematic`, `elastic`, or a paper model).
-    pub model: String,
-    pub pool_factor: f64,
-    pub pool_min: usize,
-    pub pool_max: usize,
-    /// Per-candidate random change of the posture target (deg, uniform ±), so that the pool holds several
-    /// redundancy resolutions (the iiwa's elbow) and the selection can use them. Replaces
-    /// `posture_spread_deg` for the pool when larger.
-    pub posture_spread_deg: f64,
-    /// Exchange steps of the DETMAX phase at most; absent: twice the number of points.
-    pub max_exchanges: Option<usize>,
-}
-
-impl Default for SelectionConfig {
-    fn default() -> Self {
-        SelectionConfig {
-            model: "kinematic".into(),
-            pool_factor: 20.0,
-            pool_min: 2000,
-            pool_max: 4000,
-            posture_spread_deg: 20.0,
-            max_exchanges: None,
-        }
-    }
-}
-
-impl SelectionConfig {
-    /// Pool targets for a campaign of `n` points (never fewer than `n`).
-    pub fn pool(&self, n: usize) -> usize {
-        ((self.pool_factor * n as f64).ceil() as usize)
-            .clamp(self.pool_min, self.pool_max.max(self.pool_min))
-            .max(n)
-    }
-
-    /// Checks the pool; whether `model` names a method with robot parameters is for whoever knows the
-    /// methods to say (the scenario, when it is read).
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        if !(self.pool_factor.is_finite() && self.pool_factor >= 1.0) {
-            return Err(format!(
-                "selection.pool_factor = {} must be finite and at least 1",
-                self.pool_factor
-            ));
-        }
-        if self.pool_max > MAX_POOL {
-            return Err(format!(
-                "selection.pool_max = {} exceeds {MAX_POOL}",
-                self.pool_max
-            ));
-        }
-        if self.max_exchanges.is_some_and(|m| m > 100 * MAX_POOL) {
-            return Err(format!(
-                "selection.max_exchanges exceeds {}",
-                100 * MAX_POOL
-            ));
-        }
-        if self.pool_max < self.pool_min || self.pool_min == 0 {
-            return Err(format!(
-                "selection: pool_min = {} must be positive and at most pool_max = {}",
-                self.pool_min, self.pool_max
-            ));
-        }
-        if !(self.posture_spread_deg.is_finite() && self.posture_spread_deg >= 0.0) {
-            return Err(format!(
-                "selection.posture_spread_deg = {} must be finite and non-negative",
-                self.posture_spread_deg
-            ));
-        }
-        Ok(())
-    }
-}
-
-impl CampaignConfig {
-    /// The posture in radians: where a campaign starts and what its inverse kinematics is drawn toward.
-    pub fn posture_rad(&self) -> Vec<f64> {
-        self.posture_deg.iter().map(|d| d.to_radians()).collect()
-    }
-
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        if self.posture_deg.iter().any(|v| !v.is_finite()) {
-            return Err("posture_deg must be finite".into());
-        }
-        for (name, v) in [
-            ("posture_spread_deg", self.posture_spread_deg),
-            ("limit_margin_deg", self.limit_margin_deg),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name} = {v} must be finite and non-negative"));
-            }
-        }
-        for o in &self.obstacles {
-            if !o
-                .center
-                .iter()
-                .chain(&o.half_extents)
-                .all(|v| v.is_finite())
-                || o.half_extents.iter().any(|h| *h <= 0.0)
-            {
-                return Err(format!(
-                    "obstacle '{}' needs finite centre and positive half_extents",
-                    o.name
-                ));
-            }
-        }
-        if let Some(t) = &self.trajectory {
-            t.validate()?;
-        }
-        self.selection.validate()
     }
 }
 

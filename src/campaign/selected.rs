@@ -3,7 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use super::generate::{Campaign, Generator, Rejections, Selector};
+use super::generator::{Generator, Selector};
+use super::points::{Campaign, Rejections};
 use super::region::RegionConfig;
 use super::sequence::Stop;
 use crate::error::Result;

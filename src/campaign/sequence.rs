@@ -6,7 +6,8 @@ use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 
-use super::generate::{Campaign, CampaignPoint, Generator, Rejections, Unloaded, Visited};
+use super::generator::{Generator, Unloaded};
+use super::points::{Campaign, CampaignPoint, Rejections, Visited};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::Chain;

@@ -16,73 +16,20 @@
 //! does. `measurements.csv` gains a `time` column (tracker clock, s); every `keep_every`-th sample is kept.
 
 use nalgebra::Point3;
+use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use serde::{Deserialize, Serialize};
 
-use super::generate::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint, Visited};
+use super::config::TrajectoryConfig;
+use super::points::{BEAM_END_CLEARANCE_M, Campaign, CampaignPoint, Visited};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
 use crate::robot::{Frames, JointRates, forward_kinematics};
-use crate::truth::PathPoint;
+use crate::truth::{MotionSample, PathPoint};
 use crate::world::World;
-
-/// `[campaign.trajectory]`: measure on the fly instead of stop and go. Magnitudes and their sources in
-/// `scenarios/README.md`.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct TrajectoryConfig {
-    /// Fraction of every joint's velocity and acceleration limit the path may use, in (0, 1].
-    pub speed: f64,
-    /// Joint acceleration limit (rad/s², every joint).
-    pub acceleration_rad_s2: f64,
-    /// The tracker's sample rate (Hz).
-    pub sample_rate_hz: f64,
-    /// Keep every k-th sample in the campaign (1: all).
-    #[serde(default = "one")]
-    pub keep_every: usize,
-    /// The controller's clock minus the tracker's (s): the joint readings paired with a tracker sample are
-    /// those the controller logged `clock_offset_s` before the arm was where the tracker saw it.
-    #[serde(default)]
-    pub clock_offset_s: f64,
-    /// Standard deviation of each sample's timestamp (s).
-    #[serde(default)]
-    pub jitter_s: f64,
-}
-
-fn one() -> usize {
-    1
-}
 
 /// The most samples a trajectory campaign keeps: the same bound as a region's point count.
 pub const MAX_SAMPLES: usize = 1_000_000;
-
-impl TrajectoryConfig {
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        let positive = |v: f64, max: f64, what: &str| {
-            if v.is_finite() && v > 0.0 && v <= max {
-                Ok(())
-            } else {
-                Err(format!("trajectory.{what} = {v}: must be in (0, {max}]"))
-            }
-        };
-        positive(self.speed, 1.0, "speed")?;
-        positive(self.acceleration_rad_s2, 1e3, "acceleration_rad_s2")?;
-        positive(self.sample_rate_hz, 1e5, "sample_rate_hz")?;
-        if self.keep_every == 0 {
-            return Err("trajectory.keep_every = 0: must be at least 1".into());
-        }
-        for (what, v) in [
-            ("clock_offset_s", self.clock_offset_s),
-            ("jitter_s", self.jitter_s),
-        ] {
-            if !(v.is_finite() && v.abs() <= 1.0) || (what == "jitter_s" && v < 0.0) {
-                return Err(format!("trajectory.{what} = {v}: at most 1 s in magnitude"));
-            }
-        }
-        Ok(())
-    }
-}
 
 /// One quintic segment from `q0` to `q1` with end velocities `v0`, `v1` and zero end accelerations.
 #[derive(Clone, Debug)]
@@ -257,6 +204,34 @@ pub fn measure(
     seed: u64,
 ) -> Result<TrajectoryCampaign> {
     config.validate().map_err(Error::Invalid)?;
+    let path = path_through(world, planned, posture, config)?;
+    let stamps = tracker_stamps(path.duration(), config)?;
+    let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
+    let truth_times = arm_times(&stamps, config, &mut rng)?;
+    let moved = world
+        .robot
+        .follow(&|t| path.at(t), &truth_times, Some(&mut rng))?;
+    let recorded = record(world, planned, &path, &stamps, &moved, &mut rng);
+    if recorded.campaign.points.is_empty() {
+        return Err(Error::Invalid(format!(
+            "trajectory: the tracker lost the beam at every one of the {} samples ({} \
+             outside the acceptance cone, {} blocked)",
+            moved.len(),
+            recorded.lost_acceptance_cone,
+            recorded.lost_line_of_sight
+        )));
+    }
+    Ok(recorded)
+}
+
+/// The timed path from `posture` through the planned targets, under the joints' velocity limits (1 rad/s where
+/// the URDF gives none).
+fn path_through(
+    world: &World,
+    planned: &Campaign,
+    posture: &[f64],
+    config: &TrajectoryConfig,
+) -> Result<Path> {
     let mut waypoints = vec![posture.to_vec()];
     waypoints.extend(planned.points.iter().map(|p| p.q_cmd.clone()));
     let vmax: Vec<f64> = world
@@ -271,8 +246,12 @@ pub fn measure(
             }
         })
         .collect();
-    let path = Path::plan(&waypoints, &vmax, config.acceleration_rad_s2, config.speed)?;
-    let duration = path.duration();
+    Path::plan(&waypoints, &vmax, config.acceleration_rad_s2, config.speed)
+}
+
+/// The tracker clock's stamps of the kept samples over a path of `duration` seconds; an error above
+/// [`MAX_SAMPLES`].
+fn tracker_stamps(duration: f64, config: &TrajectoryConfig) -> Result<Vec<f64>> {
     let dt = 1.0 / config.sample_rate_hz;
     let total = (duration / dt).floor() as usize + 1;
     let kept: Vec<usize> = (0..total).step_by(config.keep_every).collect();
@@ -282,25 +261,40 @@ pub fn measure(
             kept.len()
         )));
     }
-    let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
+    // The tracker stamps sample k at k·dt by its clock.
+    Ok(kept.iter().map(|&k| k as f64 * dt).collect())
+}
+
+/// The controller times at which the arm was where the tracker saw it at each of `stamps`: the stamp plus the
+/// clock offset and the stamp's jitter, drawn from `rng` one per stamp.
+fn arm_times(stamps: &[f64], config: &TrajectoryConfig, rng: &mut ChaCha8Rng) -> Result<Vec<f64>> {
     let jitter = Normal::new(0.0, config.jitter_s.max(0.0))
         .map_err(|e| Error::Invalid(format!("trajectory.jitter_s: {e}")))?;
-    // The tracker stamps sample k at k·dt by its clock; the arm was there at controller time k·dt + offset.
-    let stamps: Vec<f64> = kept.iter().map(|&k| k as f64 * dt).collect();
-    let truth_times: Vec<f64> = stamps
+    // The arm was at the tracker's sample k at controller time k·dt + offset.
+    Ok(stamps
         .iter()
-        .map(|&s| s + config.clock_offset_s + jitter.sample(&mut rng))
-        .collect();
-    let moved = world
-        .robot
-        .follow(&|t| path.at(t), &truth_times, Some(&mut rng))?;
+        .map(|&s| s + config.clock_offset_s + jitter.sample(rng))
+        .collect())
+}
+
+/// What the tracker records of the arm's motion `moved` at `stamps`: a measured point for every sample where
+/// it sees every reflector, with the joint readings the controller logged at the same stamp; the samples
+/// where the beam broke are counted, not measured. The measurement noise is drawn from `rng`.
+fn record(
+    world: &World,
+    planned: &Campaign,
+    path: &Path,
+    stamps: &[f64],
+    moved: &[MotionSample],
+    rng: &mut ChaCha8Rng,
+) -> TrajectoryCampaign {
     let mut frames = Frames::new(&world.nominal);
     let collision = CollisionModel::new(&world.nominal);
     let origin = world.tracker.origin();
     let (mut lost_acceptance_cone, mut lost_line_of_sight) = (0, 0);
-    let mut points = Vec::with_capacity(kept.len());
-    let mut dynamic_m = Vec::with_capacity(kept.len());
-    for (k, (s, m)) in stamps.iter().zip(&moved).enumerate() {
+    let mut points = Vec::with_capacity(stamps.len());
+    let mut dynamic_m = Vec::with_capacity(stamps.len());
+    for (k, (s, m)) in stamps.iter().zip(moved).enumerate() {
         let true_reflectors: Vec<Point3<f64>> =
             world.mounting.actual.iter().map(|p| m.flange * p).collect();
         // Where the beam breaks the tracker records nothing (it relocks when the reflector is seen again). The
@@ -339,26 +333,19 @@ pub fn measure(
         points.push(CampaignPoint {
             time: Some(*s),
             rates: Some(JointRates { qd, qdd }),
-            ..CampaignPoint::measured(world, visited, &mut rng)
+            ..CampaignPoint::measured(world, visited, rng)
         });
         dynamic_m.push(m.dynamic_m);
     }
-    if points.is_empty() {
-        return Err(Error::Invalid(format!(
-            "trajectory: the tracker lost the beam at every one of the {} samples ({lost_acceptance_cone} \
-             outside the acceptance cone, {lost_line_of_sight} blocked)",
-            moved.len()
-        )));
-    }
-    Ok(TrajectoryCampaign {
+    TrajectoryCampaign {
         campaign: Campaign {
             joint_names: planned.joint_names.clone(),
             points,
             rejections: planned.rejections.clone(),
         },
-        duration_s: duration,
+        duration_s: path.duration(),
         dynamic_m,
         lost_acceptance_cone,
         lost_line_of_sight,
-    })
+    }
 }

@@ -38,11 +38,12 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Quaternion, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 
+use super::orientation::Convention;
 use super::table::{self, Dialect, Table};
-use super::{Dataset, ExtraInputs};
+use super::{Dataset, ExtraInputs, Split};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::chain::JointKind;
@@ -174,88 +175,6 @@ fn default_delimiter() -> String {
 
 fn default_decimal() -> String {
     ".".into()
-}
-
-/// A parsed orientation convention.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Convention {
-    /// `R = R_a(θ1)·R_b(θ2)·R_c(θ3)`, axes 0–2.
-    Intrinsic([usize; 3]),
-    /// `R = R_c(θ3)·R_b(θ2)·R_a(θ1)`.
-    Extrinsic([usize; 3]),
-    QuaternionWxyz,
-    QuaternionXyzw,
-}
-
-impl Convention {
-    pub fn parse(text: &str) -> std::result::Result<Convention, String> {
-        let t = text.trim().to_ascii_lowercase();
-        let bad = || {
-            format!(
-                "orientation convention '{text}': use intrinsic-ABC or extrinsic-ABC (A, B, C each x, y or z, \
-                 no axis twice in a row, e.g. intrinsic-xyz, extrinsic-zyx, intrinsic-zyz), quaternion-wxyz or \
-                 quaternion-xyzw"
-            )
-        };
-        match t.as_str() {
-            "quaternion-wxyz" => return Ok(Convention::QuaternionWxyz),
-            "quaternion-xyzw" => return Ok(Convention::QuaternionXyzw),
-            _ => {}
-        }
-        let (kind, axes) = t.split_once('-').ok_or_else(bad)?;
-        let axes: Vec<usize> = axes
-            .chars()
-            .map(|c| match c {
-                'x' => Some(0),
-                'y' => Some(1),
-                'z' => Some(2),
-                _ => None,
-            })
-            .collect::<Option<Vec<_>>>()
-            .ok_or_else(bad)?;
-        let axes: [usize; 3] = axes.try_into().map_err(|_| bad())?;
-        if axes[0] == axes[1] || axes[1] == axes[2] {
-            return Err(bad());
-        }
-        match kind {
-            "intrinsic" => Ok(Convention::Intrinsic(axes)),
-            "extrinsic" => Ok(Convention::Extrinsic(axes)),
-            _ => Err(bad()),
-        }
-    }
-
-    /// Number of columns: 3 angles or 4 quaternion components.
-    pub fn columns(self) -> usize {
-        match self {
-            Convention::Intrinsic(_) | Convention::Extrinsic(_) => 3,
-            _ => 4,
-        }
-    }
-
-    /// The rotation of three angles (rad) or four quaternion components; `None` for a quaternion whose norm
-    /// is more than 1e-2 from 1.
-    pub fn rotation(self, v: &[f64]) -> Option<UnitQuaternion<f64>> {
-        let about = |axis: usize, angle: f64| {
-            UnitQuaternion::from_axis_angle(
-                &nalgebra::Unit::new_unchecked(Vector3::ith(axis, 1.0)),
-                angle,
-            )
-        };
-        let quaternion = |w: f64, x: f64, y: f64, z: f64| {
-            let q = Quaternion::new(w, x, y, z);
-            ((q.norm() - 1.0).abs() <= 1e-2).then(|| UnitQuaternion::from_quaternion(q))
-        };
-        match self {
-            Convention::Intrinsic([a, b, c]) => {
-                Some(about(a, v[0]) * about(b, v[1]) * about(c, v[2]))
-            }
-            Convention::Extrinsic([a, b, c]) => {
-                Some(about(c, v[2]) * about(b, v[1]) * about(a, v[0]))
-            }
-            Convention::QuaternionWxyz => quaternion(v[0], v[1], v[2], v[3]),
-            Convention::QuaternionXyzw => quaternion(v[3], v[0], v[1], v[2]),
-        }
-    }
 }
 
 /// The mappings of `mappings/`, built in.
@@ -493,23 +412,48 @@ impl ColumnMapping {
             origin,
             Dialect::mapped(self.delimiter_byte().map_err(err)?, decimal),
         )?;
-
         let joint_names = chain.joint_names();
+        let columns = self.columns(&table, chain, &joint_names)?;
+        let rows = self.rows(&table, &columns)?;
+        Ok(Dataset {
+            origin: origin.to_string(),
+            joint_names,
+            point_ids: rows.ids,
+            q: rows.q,
+            measured: rows.measured,
+            nominal_reflectors: None,
+            nominal_flange: None,
+            split: rows.split,
+            regions: None,
+            measured_orientation: rows.rotations,
+            extra_inputs: (!self.inputs.is_empty()).then(|| ExtraInputs {
+                names: self.inputs.keys().cloned().collect(),
+                values: rows.inputs,
+            }),
+            time: None,
+            rates: None,
+            base_frame: self.position.frame == PositionFrame::Base,
+        })
+    }
+
+    /// The file's columns this mapping names, each found in `table`'s header (an error names the first one
+    /// missing); the joints are `chain`'s, named `joint_names`.
+    fn columns(&self, table: &Table, chain: &Chain, joint_names: &[String]) -> Result<Columns> {
         let prismatic: Vec<bool> = chain
             .joints
             .iter()
             .map(|j| j.kind == JointKind::Prismatic)
             .collect();
-        let (joint_cols, joint_scale) = self.joint_columns(&table, &joint_names, &prismatic)?;
+        let (joints, joint_scale) = self.joint_columns(table, joint_names, &prismatic)?;
         let axes = ["x", "y", "z"];
-        let position_cols = self
+        let position = self
             .position
             .columns
             .iter()
             .zip(axes)
             .map(|(c, a)| table.find(c, &format!("[position] {a}")))
             .collect::<Result<Vec<_>>>()?;
-        let difference_cols = match &self.position.difference {
+        let difference = match &self.position.difference {
             Some(d) => Some(
                 d.iter()
                     .zip(axes)
@@ -520,7 +464,7 @@ impl ColumnMapping {
         };
         let orientation = match &self.orientation {
             Some(o) => {
-                let convention = Convention::parse(&o.convention).map_err(err)?;
+                let convention = Convention::parse(&o.convention).map_err(|m| table.error(m))?;
                 let cols = o
                     .columns
                     .iter()
@@ -536,113 +480,162 @@ impl ColumnMapping {
             }
             None => None,
         };
-        let input_cols = self
+        let inputs = self
             .inputs
             .iter()
             .map(|(name, c)| table.find(c, &format!("[inputs] {name}")))
             .collect::<Result<Vec<_>>>()?;
-        let id_col = match &self.point_id {
+        let id = match &self.point_id {
             Some(c) => Some(table.find(c, "point_id")?),
             None => None,
         };
-        let split_col = match &self.split {
+        let split = match &self.split {
             Some(c) => Some(table.find(c, "split")?),
             None => None,
         };
+        Ok(Columns {
+            joints,
+            joint_scale,
+            position,
+            difference,
+            orientation,
+            inputs,
+            id,
+            split,
+        })
+    }
 
+    /// Every row of `table` read through `columns`, in metres and radians; an error names the first faulty
+    /// cell.
+    fn rows(&self, table: &Table, columns: &Columns) -> Result<Rows> {
         let n = table.rows.len();
-        let mut q = Vec::with_capacity(n);
-        let mut measured = Vec::with_capacity(n);
-        let mut rotations = orientation.as_ref().map(|_| Vec::with_capacity(n));
-        let mut inputs = Vec::with_capacity(n);
-        let mut split = split_col.map(|_| Vec::with_capacity(n));
-        let mut ids = Vec::with_capacity(n);
+        let mut rows = Rows {
+            q: Vec::with_capacity(n),
+            measured: Vec::with_capacity(n),
+            rotations: columns.orientation.as_ref().map(|_| Vec::with_capacity(n)),
+            inputs: Vec::with_capacity(n),
+            split: columns.split.map(|_| Vec::with_capacity(n)),
+            ids: Vec::with_capacity(n),
+        };
         let mut seen: HashMap<String, usize> = HashMap::new();
-        let length = self.position.unit.metres();
         for r in 0..n {
-            q.push(
-                joint_cols
+            rows.q.push(
+                columns
+                    .joints
                     .iter()
-                    .zip(&joint_scale)
+                    .zip(&columns.joint_scale)
                     .map(|(&c, s)| Ok(table.number(r, c)? * s))
                     .collect::<Result<Vec<f64>>>()?,
             );
-            let mut p = position_cols
-                .iter()
-                .map(|&c| Ok(table.number(r, c)? * length))
-                .collect::<Result<Vec<f64>>>()?;
-            if let Some(cols) = &difference_cols {
-                let sign = f64::from(self.position.difference_sign);
-                for (p, &c) in p.iter_mut().zip(cols) {
-                    *p += sign * table.number(r, c)? * length;
-                }
+            rows.measured
+                .push(vec![self.position_at(table, columns, r)?]);
+            if let (Some(out), Some(orientation)) = (&mut rows.rotations, &columns.orientation) {
+                out.push(rotation_at(table, orientation, r)?);
             }
-            measured.push(vec![Point3::new(p[0], p[1], p[2])]);
-            if let (Some(out), Some((convention, scale, cols))) = (&mut rotations, &orientation) {
-                let is_quaternion = cols.len() == 4;
-                let v = cols
-                    .iter()
-                    .map(|&c| Ok(table.number(r, c)? * if is_quaternion { 1.0 } else { *scale }))
-                    .collect::<Result<Vec<f64>>>()?;
-                out.push(convention.rotation(&v).ok_or_else(|| {
-                    table.error(format!(
-                        "row {}, columns {}…{}: the quaternion's norm is {}, not 1",
-                        r + 2,
-                        table.headers[cols[0]],
-                        table.headers[cols[3]],
-                        Quaternion::new(v[0], v[1], v[2], v[3]).norm()
-                    ))
-                })?);
-            }
-            inputs.push(
-                input_cols
+            rows.inputs.push(
+                columns
+                    .inputs
                     .iter()
                     .map(|&c| table.number(r, c))
                     .collect::<Result<Vec<f64>>>()?,
             );
-            if let (Some(out), Some(c)) = (&mut split, split_col) {
+            if let (Some(out), Some(c)) = (&mut rows.split, columns.split) {
                 out.push(table.split(r, c)?);
             }
-            let id = match id_col {
-                Some(c) => {
-                    let id = table.cell(r, c);
-                    if id.is_empty() {
-                        return Err(table.error(format!("{}: empty", table.at(r, c))));
-                    }
-                    if let Some(first) = seen.insert(id.to_string(), r) {
-                        return Err(table.error(format!(
-                            "{}: '{}' repeats row {}",
-                            table.at(r, c),
-                            table::shown(id),
-                            first + 2
-                        )));
-                    }
-                    id.to_string()
-                }
+            rows.ids.push(match columns.id {
+                Some(c) => point_id(table, r, c, &mut seen)?,
                 None => (r + 2).to_string(),
-            };
-            ids.push(id);
+            });
         }
-        Ok(Dataset {
-            origin: origin.to_string(),
-            joint_names,
-            point_ids: ids,
-            q,
-            measured,
-            nominal_reflectors: None,
-            nominal_flange: None,
-            split,
-            regions: None,
-            measured_orientation: rotations,
-            extra_inputs: (!self.inputs.is_empty()).then(|| ExtraInputs {
-                names: self.inputs.keys().cloned().collect(),
-                values: inputs,
-            }),
-            time: None,
-            rates: None,
-            base_frame: self.position.frame == PositionFrame::Base,
-        })
+        Ok(rows)
     }
+
+    /// The measured point of row `r`: the position columns plus the signed difference, if mapped (metres).
+    fn position_at(&self, table: &Table, columns: &Columns, r: usize) -> Result<Point3<f64>> {
+        let length = self.position.unit.metres();
+        let mut p = columns
+            .position
+            .iter()
+            .map(|&c| Ok(table.number(r, c)? * length))
+            .collect::<Result<Vec<f64>>>()?;
+        if let Some(cols) = &columns.difference {
+            let sign = f64::from(self.position.difference_sign);
+            for (p, &c) in p.iter_mut().zip(cols) {
+                *p += sign * table.number(r, c)? * length;
+            }
+        }
+        Ok(Point3::new(p[0], p[1], p[2]))
+    }
+}
+
+/// The columns a mapping reads, by index in the file.
+struct Columns {
+    joints: Vec<usize>,
+    /// Per joint, the scale to radians (metres for a prismatic joint).
+    joint_scale: Vec<f64>,
+    position: Vec<usize>,
+    difference: Option<Vec<usize>>,
+    /// The convention, the angle unit's scale to radians and the columns of a 6-DoF probe's orientation.
+    orientation: Option<(Convention, f64, Vec<usize>)>,
+    inputs: Vec<usize>,
+    id: Option<usize>,
+    split: Option<usize>,
+}
+
+/// What the rows of a mapped file hold, row by row.
+struct Rows {
+    q: Vec<Vec<f64>>,
+    measured: Vec<Vec<Point3<f64>>>,
+    rotations: Option<Vec<UnitQuaternion<f64>>>,
+    inputs: Vec<Vec<f64>>,
+    split: Option<Vec<Split>>,
+    ids: Vec<String>,
+}
+
+/// The orientation of row `r` read through `(convention, scale, cols)`; an error for a quaternion that is not
+/// of unit norm.
+fn rotation_at(
+    table: &Table,
+    (convention, scale, cols): &(Convention, f64, Vec<usize>),
+    r: usize,
+) -> Result<UnitQuaternion<f64>> {
+    let is_quaternion = cols.len() == 4;
+    let v = cols
+        .iter()
+        .map(|&c| Ok(table.number(r, c)? * if is_quaternion { 1.0 } else { *scale }))
+        .collect::<Result<Vec<f64>>>()?;
+    convention.rotation(&v).ok_or_else(|| {
+        table.error(format!(
+            "row {}, columns {}…{}: the quaternion's norm is {}, not 1",
+            r + 2,
+            table.headers[cols[0]],
+            table.headers[cols[3]],
+            Quaternion::new(v[0], v[1], v[2], v[3]).norm()
+        ))
+    })
+}
+
+/// The point id of row `r` in column `c`: not empty, and not a repeat of an earlier row's (`seen` maps the ids
+/// read so far to their rows).
+fn point_id(
+    table: &Table,
+    r: usize,
+    c: usize,
+    seen: &mut HashMap<String, usize>,
+) -> Result<String> {
+    let id = table.cell(r, c);
+    if id.is_empty() {
+        return Err(table.error(format!("{}: empty", table.at(r, c))));
+    }
+    if let Some(first) = seen.insert(id.to_string(), r) {
+        return Err(table.error(format!(
+            "{}: '{}' repeats row {}",
+            table.at(r, c),
+            table::shown(id),
+            first + 2
+        )));
+    }
+    Ok(id.to_string())
 }
 
 #[cfg(test)]
@@ -709,52 +702,6 @@ mod tests {
             .unwrap_err()
             .line();
             assert!(e.contains("m.toml") && e.contains(needle), "{e}");
-        }
-    }
-
-    #[test]
-    fn conventions() {
-        let v = [0.3, -0.2, 0.5];
-        let (x, y, z) = (Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis());
-        let r = |a: &nalgebra::Unit<Vector3<f64>>, t: f64| UnitQuaternion::from_axis_angle(a, t);
-        let intr = Convention::parse("intrinsic-xyz")
-            .unwrap()
-            .rotation(&v)
-            .unwrap();
-        assert!(intr.angle_to(&(r(&x, v[0]) * r(&y, v[1]) * r(&z, v[2]))) < 1e-15);
-        let extr = Convention::parse("Extrinsic-XYZ")
-            .unwrap()
-            .rotation(&v)
-            .unwrap();
-        // nalgebra's roll-pitch-yaw is extrinsic x-y-z.
-        assert!(extr.angle_to(&UnitQuaternion::from_euler_angles(v[0], v[1], v[2])) < 1e-15);
-        let zyz = Convention::parse("intrinsic-zyz")
-            .unwrap()
-            .rotation(&v)
-            .unwrap();
-        assert!(zyz.angle_to(&(r(&z, v[0]) * r(&y, v[1]) * r(&z, v[2]))) < 1e-15);
-        let q = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
-        let c = q.coords; // i, j, k, w
-        let wxyz = Convention::QuaternionWxyz
-            .rotation(&[c[3], c[0], c[1], c[2]])
-            .unwrap();
-        let xyzw = Convention::QuaternionXyzw
-            .rotation(&[c[0], c[1], c[2], c[3]])
-            .unwrap();
-        assert!(wxyz.angle_to(&q) < 1e-15 && xyzw.angle_to(&q) < 1e-15);
-        assert!(
-            Convention::QuaternionWxyz
-                .rotation(&[2.0, 0.0, 0.0, 0.0])
-                .is_none()
-        );
-        for bad in [
-            "intrinsic-xxz",
-            "xyz",
-            "intrinsic-xy",
-            "sideways-xyz",
-            "quaternion",
-        ] {
-            assert!(Convention::parse(bad).is_err(), "{bad}");
         }
     }
 }

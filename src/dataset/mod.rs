@@ -18,6 +18,7 @@ use nalgebra::{Isometry3, Point3, Quaternion, Translation3, Unit, UnitQuaternion
 use crate::error::Result;
 
 pub mod mapping;
+pub mod orientation;
 pub mod range;
 mod split;
 mod table;

@@ -7,7 +7,7 @@ use super::model::DesignModel;
 use super::select::{SelectOptions, d_optimal};
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
-use crate::campaign::region::SelectionConfig;
+use crate::campaign::config::SelectionConfig;
 use crate::campaign::{DistributionKind, Selector};
 use crate::error::{Error, Result};
 

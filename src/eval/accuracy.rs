@@ -26,7 +26,7 @@ use super::stats::Stats;
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{self, MethodKind};
 use crate::calib::regression::RegressionOptions;
-use crate::campaign::generate::{GROUND_TRUTH_ATTEMPT, TruePoint};
+use crate::campaign::ground_truth::{GROUND_TRUTH_ATTEMPT, TruePoint};
 use crate::campaign::{
     CampaignConfig, DistributionKind, Generator, RegionConfig, Rejections, Simulation,
 };

@@ -375,24 +375,9 @@ impl IkSolver {
     /// another joint meets its bound. Returns the largest joint motion and whether the step the solver
     /// wanted (before being cut short at a bound) was negligible.
     fn null_step(&mut self, chain: &Chain) -> (f64, bool) {
-        let n = self.q.len();
         let inset = self.opts.limit_margin.max(0.0) + CLEARANCE;
-        let bounds = |j: usize| {
-            let (lo, hi) = (chain.joints[j].lower + inset, chain.joints[j].upper - inset);
-            if lo <= hi {
-                (lo, hi)
-            } else {
-                (0.5 * (lo + hi), 0.5 * (lo + hi))
-            }
-        };
-        let mut worst = (0, 0.0_f64);
-        for i in 0..n {
-            let (lo, hi) = bounds(i);
-            let delta = self.q[i].clamp(lo, hi) - self.q[i];
-            if delta.abs() > worst.1.abs() {
-                worst = (i, delta);
-            }
-        }
+        let bounds = |j: usize| joint_bounds(chain, inset, j);
+        let worst = self.worst_violation(&bounds);
         let repair = worst.1 != 0.0;
         if repair {
             self.z.fill(0.0);
@@ -404,13 +389,70 @@ impl IkSolver {
         } else {
             return (0.0, true);
         }
+        // The joint being repaired moves by its own share, whatever its bounds say.
+        let repaired = repair.then_some(worst.0);
 
-        // Projected motion `(I − J⁺J) z`, with an active set of held joints.
+        let Some(held_any) = self.project_holding(&bounds, repaired) else {
+            return (0.0, true);
+        };
+
+        if repair {
+            // Scaled by its own share of the motion, the step moves the joint by exactly `delta`.
+            let share = self.dq[worst.0] / worst.1;
+            self.grad_prev_valid = false;
+            self.boost = 1.0;
+            if share.is_nan() || share < REPAIR_MIN_SHARE {
+                return (0.0, true);
+            }
+            self.dq /= share;
+        } else {
+            self.boost_posture_step(held_any);
+        }
+        let clipped = limit_step(&mut self.dq);
+        let wanted = self.dq.amax();
+
+        let alpha = self.room(&bounds, repaired);
+        self.dq *= alpha;
+        for i in 0..self.q.len() {
+            let (lo, hi) = bounds(i);
+            let inside = lo <= self.q[i] && self.q[i] <= hi;
+            self.q[i] += self.dq[i];
+            if inside {
+                self.q[i] = self.q[i].clamp(lo, hi);
+            }
+        }
+        // A step cut short says nothing about the curvature; the next ratio must not use it.
+        self.grad_prev_valid = !(repair || held_any || clipped || alpha < 1.0);
+        (self.dq.amax(), wanted <= NULL_SETTLED)
+    }
+
+    /// The joint furthest outside its bounds and the signed motion that brings it back; `(0, 0.0)` when every
+    /// joint is inside.
+    fn worst_violation(&self, bounds: &impl Fn(usize) -> (f64, f64)) -> (usize, f64) {
+        let mut worst = (0, 0.0_f64);
+        for i in 0..self.q.len() {
+            let (lo, hi) = bounds(i);
+            let delta = self.q[i].clamp(lo, hi) - self.q[i];
+            if delta.abs() > worst.1.abs() {
+                worst = (i, delta);
+            }
+        }
+        worst
+    }
+
+    /// Projected motion `(I − J⁺J) z` into `self.dq`, with an active set of held joints: a joint on a bound that
+    /// the motion would push outward (other than `repaired`) is held, its column of `self.jac` and its share of
+    /// `self.z` zeroed, and the projection repeated. Whether any joint is held; `None` if the projector could
+    /// not be factored.
+    fn project_holding(
+        &mut self,
+        bounds: &impl Fn(usize) -> (f64, f64),
+        repaired: Option<usize>,
+    ) -> Option<bool> {
+        let n = self.q.len();
         let mut held_any = false;
         for _ in 0..=n {
-            let Some(chol) = gram(&self.jac, LAMBDA_NULL).cholesky() else {
-                return (0.0, true);
-            };
+            let chol = gram(&self.jac, LAMBDA_NULL).cholesky()?;
             let mut jz = Vector6::zeros();
             jz.gemv(1.0, &self.jac, &self.z, 0.0);
             let y = chol.solve(&jz);
@@ -418,7 +460,7 @@ impl IkSolver {
             self.dq.gemv_tr(-1.0, &self.jac, &y, 1.0);
             let mut newly_held = false;
             for i in 0..n {
-                if repair && i == worst.0 {
+                if repaired == Some(i) {
                     continue;
                 }
                 let (lo, hi) = bounds(i);
@@ -436,42 +478,37 @@ impl IkSolver {
                 break;
             }
         }
+        Some(held_any)
+    }
 
-        if repair {
-            // Scaled by its own share of the motion, the step moves the joint by exactly `delta`.
-            let share = self.dq[worst.0] / worst.1;
-            self.grad_prev_valid = false;
-            self.boost = 1.0;
-            if share.is_nan() || share < REPAIR_MIN_SHARE {
-                return (0.0, true);
+    /// Scales the posture step in `self.dq` by the boost, after updating the boost from the previous step's
+    /// gradient when that step was a clean one and no joint is `held_any` now.
+    fn boost_posture_step(&mut self, held_any: bool) {
+        // The plain projected step converges linearly, and slowly when the posture is far from the
+        // self-motion manifold (the posture distance is then flat along it: rates of 0.9 per step on
+        // the iiwa). The boost is a secant estimate of the inverse curvature along the manifold:
+        // successive gradients shrink by 1 − boost·k·h, and boost ← boost / (1 − ratio) turns the
+        // next step into a Newton step toward the same point. Bounded so that one noisy ratio cannot
+        // run away.
+        if self.grad_prev_valid && !held_any {
+            let prev = self.grad_prev.norm_squared();
+            if prev > SECANT_FLOOR * SECANT_FLOOR {
+                let ratio = (self.dq.dot(&self.grad_prev) / prev).clamp(-4.0, 0.95);
+                self.boost = (self.boost / (1.0 - ratio)).clamp(0.05, 1e3);
             }
-            self.dq /= share;
-        } else {
-            // The plain projected step converges linearly, and slowly when the posture is far from the
-            // self-motion manifold (the posture distance is then flat along it: rates of 0.9 per step on
-            // the iiwa). The boost is a secant estimate of the inverse curvature along the manifold:
-            // successive gradients shrink by 1 − boost·k·h, and boost ← boost / (1 − ratio) turns the
-            // next step into a Newton step toward the same point. Bounded so that one noisy ratio cannot
-            // run away.
-            if self.grad_prev_valid && !held_any {
-                let prev = self.grad_prev.norm_squared();
-                if prev > SECANT_FLOOR * SECANT_FLOOR {
-                    let ratio = (self.dq.dot(&self.grad_prev) / prev).clamp(-4.0, 0.95);
-                    self.boost = (self.boost / (1.0 - ratio)).clamp(0.05, 1e3);
-                }
-            }
-            self.grad_prev.copy_from(&self.dq);
-            self.dq *= self.boost;
         }
-        let clipped = limit_step(&mut self.dq);
-        let wanted = self.dq.amax();
+        self.grad_prev.copy_from(&self.dq);
+        self.dq *= self.boost;
+    }
 
-        // Stop where a joint inside its bounds meets one.
+    /// The fraction of `self.dq` that stops where a joint inside its bounds meets one (1 when none does); the
+    /// joint being `repaired` and joints already outside do not limit it.
+    fn room(&self, bounds: &impl Fn(usize) -> (f64, f64), repaired: Option<usize>) -> f64 {
         let mut alpha = 1.0_f64;
-        for i in 0..n {
+        for i in 0..self.q.len() {
             let (lo, hi) = bounds(i);
             let (qi, di) = (self.q[i], self.dq[i]);
-            if (repair && i == worst.0) || qi < lo || qi > hi {
+            if repaired == Some(i) || qi < lo || qi > hi {
                 continue;
             }
             let room = if di > 0.0 { hi - qi } else { qi - lo };
@@ -479,18 +516,18 @@ impl IkSolver {
                 alpha = room / di.abs();
             }
         }
-        self.dq *= alpha;
-        for i in 0..n {
-            let (lo, hi) = bounds(i);
-            let inside = lo <= self.q[i] && self.q[i] <= hi;
-            self.q[i] += self.dq[i];
-            if inside {
-                self.q[i] = self.q[i].clamp(lo, hi);
-            }
-        }
-        // A step cut short says nothing about the curvature; the next ratio must not use it.
-        self.grad_prev_valid = !(repair || held_any || clipped || alpha < 1.0);
-        (self.dq.amax(), wanted <= NULL_SETTLED)
+        alpha
+    }
+}
+
+/// Joint `j`'s bounds: its limits less `inset` on each side, or their midpoint when the range is narrower
+/// than that.
+fn joint_bounds(chain: &Chain, inset: f64, j: usize) -> (f64, f64) {
+    let (lo, hi) = (chain.joints[j].lower + inset, chain.joints[j].upper - inset);
+    if lo <= hi {
+        (lo, hi)
+    } else {
+        (0.5 * (lo + hi), 0.5 * (lo + hi))
     }
 }
 

@@ -30,9 +30,45 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
     if robot.links.is_empty() {
         return Err(err("no links".into()));
     }
+    check_names(&robot).map_err(err)?;
+    let tree = Tree::of(&robot).map_err(err)?;
+    let (path_joints, leaf) = serial_path(&robot, &tree).map_err(err)?;
+    let flange_name = match flange_link {
+        Some(name) => {
+            if !tree.link_index.contains_key(name) {
+                return Err(err(format!("flange link '{name}' does not exist")));
+            }
+            name.to_string()
+        }
+        None => robot.links[leaf].name.clone(),
+    };
+    let Assembled {
+        joints,
+        bodies,
+        flange,
+    } = assemble(&robot, &tree, &path_joints, &flange_name).map_err(err)?;
+    let Some(flange) = flange else {
+        return Err(err(format!(
+            "flange link '{flange_name}' is not on the chain"
+        )));
+    };
+    if joints.is_empty() {
+        return Err(err("no movable joint".into()));
+    }
+    Ok(Chain {
+        name: robot.name.clone(),
+        base: Isometry3::identity(),
+        joints,
+        bodies,
+        flange,
+        flange_link: flange_name,
+    })
+}
 
-    // One name, one thing: a data column is matched to a joint by its name, so a repeated name would drive
-    // two joints from one column (issue 14: 81 mm of error, and no complaint).
+/// One name, one thing: a data column is matched to a joint by its name, so a repeated name would drive
+/// two joints from one column (issue 14: 81 mm of error, and no complaint). Mimic joints are refused for the
+/// same reason.
+fn check_names(robot: &urdf_rs::Robot) -> std::result::Result<(), String> {
     for (what, names) in [
         (
             "link",
@@ -49,218 +85,167 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
     ] {
         for (i, name) in names.iter().enumerate() {
             if names[..i].contains(name) {
-                return Err(err(format!(
+                return Err(format!(
                     "two {what}s are named '{name}'; names must be unique"
-                )));
+                ));
             }
         }
     }
     if let Some(j) = robot.joints.iter().find(|j| j.mimic.is_some()) {
         let leader = j.mimic.as_ref().map_or("", |m| m.joint.as_str());
-        return Err(err(format!(
+        return Err(format!(
             "joint '{}' mimics '{leader}': mimic joints are not supported (every joint is read from its own \
              column; model a coupled joint as fixed or give it its own column)",
             j.name
-        )));
+        ));
     }
-    let link_index: HashMap<&str, usize> = robot
-        .links
-        .iter()
-        .enumerate()
-        .map(|(i, l)| (l.name.as_str(), i))
-        .collect();
-    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
-    let mut child_joints: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
-    for (ji, j) in robot.joints.iter().enumerate() {
-        let parent = *link_index.get(j.parent.link.as_str()).ok_or_else(|| {
-            err(format!(
-                "joint '{}' names parent link '{}', which does not exist",
-                j.name, j.parent.link
-            ))
-        })?;
-        let child = *link_index.get(j.child.link.as_str()).ok_or_else(|| {
-            err(format!(
-                "joint '{}' names child link '{}', which does not exist",
-                j.name, j.child.link
-            ))
-        })?;
-        if let Some(other) = parent_joint[child] {
-            return Err(err(format!(
-                "link '{}' is the child of two joints ('{}' and '{}'): a closed loop, not a serial chain",
-                j.child.link, robot.joints[other].name, j.name
-            )));
-        }
-        parent_joint[child] = Some(ji);
-        child_joints[parent].push(ji);
-    }
-    let roots: Vec<usize> = (0..robot.links.len())
-        .filter(|&i| parent_joint[i].is_none())
-        .collect();
-    let root = match roots.as_slice() {
-        [r] => *r,
-        [] => return Err(err("every link has a parent: the joints form a loop".into())),
-        many => {
-            let names: Vec<&str> = many.iter().map(|&i| robot.links[i].name.as_str()).collect();
-            return Err(err(format!(
-                "several root links ({}): not one connected chain",
-                names.join(", ")
-            )));
-        }
-    };
+    Ok(())
+}
 
-    // Walk root → leaf, refusing branches: a calibration chain has one tool.
+/// How the URDF's joints connect its links: each link's index by name, the joints leaving each link, and the
+/// one root link.
+struct Tree<'a> {
+    link_index: HashMap<&'a str, usize>,
+    child_joints: Vec<Vec<usize>>,
+    root: usize,
+}
+
+impl<'a> Tree<'a> {
+    /// The tree of `robot`, refused when a joint names a missing link, a link has two parents, or there is not
+    /// exactly one root.
+    fn of(robot: &'a urdf_rs::Robot) -> std::result::Result<Tree<'a>, String> {
+        let link_index: HashMap<&str, usize> = robot
+            .links
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (l.name.as_str(), i))
+            .collect();
+        let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+        let mut child_joints: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+        for (ji, j) in robot.joints.iter().enumerate() {
+            let parent = *link_index.get(j.parent.link.as_str()).ok_or_else(|| {
+                format!(
+                    "joint '{}' names parent link '{}', which does not exist",
+                    j.name, j.parent.link
+                )
+            })?;
+            let child = *link_index.get(j.child.link.as_str()).ok_or_else(|| {
+                format!(
+                    "joint '{}' names child link '{}', which does not exist",
+                    j.name, j.child.link
+                )
+            })?;
+            if let Some(other) = parent_joint[child] {
+                return Err(format!(
+                    "link '{}' is the child of two joints ('{}' and '{}'): a closed loop, not a serial chain",
+                    j.child.link, robot.joints[other].name, j.name
+                ));
+            }
+            parent_joint[child] = Some(ji);
+            child_joints[parent].push(ji);
+        }
+        let roots: Vec<usize> = (0..robot.links.len())
+            .filter(|&i| parent_joint[i].is_none())
+            .collect();
+        let root = match roots.as_slice() {
+            [r] => *r,
+            [] => return Err("every link has a parent: the joints form a loop".into()),
+            many => {
+                let names: Vec<&str> = many.iter().map(|&i| robot.links[i].name.as_str()).collect();
+                return Err(format!(
+                    "several root links ({}): not one connected chain",
+                    names.join(", ")
+                ));
+            }
+        };
+        Ok(Tree {
+            link_index,
+            child_joints,
+            root,
+        })
+    }
+}
+
+/// The joints from the root to the leaf, in order, and the leaf link. Walks root → leaf, refusing branches: a
+/// calibration chain has one tool.
+fn serial_path(
+    robot: &urdf_rs::Robot,
+    tree: &Tree,
+) -> std::result::Result<(Vec<usize>, usize), String> {
     let mut path_joints = Vec::new();
-    let mut link = root;
+    let mut link = tree.root;
     let mut visited = vec![false; robot.links.len()];
     loop {
         if visited[link] {
-            return Err(err("the joints form a loop".into()));
+            return Err("the joints form a loop".into());
         }
         visited[link] = true;
-        match child_joints[link].as_slice() {
+        match tree.child_joints[link].as_slice() {
             [] => break,
             [j] => {
                 path_joints.push(*j);
-                link = link_index[robot.joints[*j].child.link.as_str()];
+                link = tree.link_index[robot.joints[*j].child.link.as_str()];
             }
             many => {
                 let names: Vec<&str> = many
                     .iter()
                     .map(|&j| robot.joints[j].name.as_str())
                     .collect();
-                return Err(err(format!(
+                return Err(format!(
                     "link '{}' branches into joints {}: only serial chains are supported",
                     robot.links[link].name,
                     names.join(", ")
-                )));
+                ));
             }
         }
     }
     if let Some(unvisited) = visited.iter().position(|v| !v) {
-        return Err(err(format!(
+        return Err(format!(
             "link '{}' is not on the chain from the root: the joints form a loop",
             robot.links[unvisited].name
-        )));
+        ));
     }
+    Ok((path_joints, link))
+}
 
-    let flange_name = match flange_link {
-        Some(name) => {
-            if !link_index.contains_key(name) {
-                return Err(err(format!("flange link '{name}' does not exist")));
-            }
-            name.to_string()
-        }
-        None => robot.links[link].name.clone(),
-    };
+/// The chain's movable joints and rigid bodies along a path, up to the flange link.
+struct Assembled {
+    joints: Vec<Joint>,
+    bodies: Vec<Body>,
+    /// The flange's pose in its body; `None` when the flange link is not on the path.
+    flange: Option<Isometry3<f64>>,
+}
 
+/// The chain along `path_joints` up to the flange link: fixed joints merge their child link into the body before
+/// them.
+fn assemble(
+    robot: &urdf_rs::Robot,
+    tree: &Tree,
+    path_joints: &[usize],
+    flange_name: &str,
+) -> std::result::Result<Assembled, String> {
     let mut joints = Vec::new();
-    let mut bodies = vec![Body {
-        links: Vec::new(),
-        inertial: Inertial::ZERO,
-        colliders: Vec::new(),
-    }];
+    let mut bodies = vec![empty_body()];
     // Pose of the current URDF link in the frame of the body it is merged into.
     let mut in_body = Isometry3::identity();
     let mut flange = None;
-    let mut current = root;
-    let attach =
-        |bodies: &mut Vec<Body>, link: &urdf_rs::Link, pose: &Isometry3<f64>| -> Result<()> {
-            let body = bodies.last_mut().expect("bodies start non-empty");
-            body.links.push(link.name.clone());
-            let inertial =
-                link_inertial(link).map_err(|m| err(format!("link '{}': {m}", link.name)))?;
-            body.inertial = body.inertial.combined(&inertial.transformed(pose));
-            for c in &link.collision {
-                let local =
-                    pose_of(&c.origin).map_err(|m| err(format!("link '{}': {m}", link.name)))?;
-                if let Some(shape) =
-                    shape_of(&c.geometry).map_err(|m| err(format!("link '{}': {m}", link.name)))?
-                {
-                    body.colliders.push(Collider {
-                        origin: pose * local,
-                        shape,
-                        link: link.name.clone(),
-                    });
-                }
-            }
-            Ok(())
-        };
+    let mut current = tree.root;
     attach(&mut bodies, &robot.links[current], &in_body)?;
     if robot.links[current].name == flange_name {
         flange = Some(in_body);
     }
-    for &ji in &path_joints {
+    for &ji in path_joints {
         if flange.is_some() {
             break;
         }
         let j = &robot.joints[ji];
-        let origin = pose_of(&j.origin).map_err(|m| err(format!("joint '{}': {m}", j.name)))?;
-        current = link_index[j.child.link.as_str()];
-        let kind = match j.joint_type {
-            urdf_rs::JointType::Fixed => None,
-            urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
-                Some(JointKind::Revolute)
-            }
-            urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
-            ref other => {
-                return Err(err(format!(
-                    "joint '{}' has type {other:?}; only revolute, continuous, prismatic and fixed are supported",
-                    j.name
-                )));
-            }
-        };
-        match kind {
+        let origin = pose_of(&j.origin).map_err(|m| format!("joint '{}': {m}", j.name))?;
+        current = tree.link_index[j.child.link.as_str()];
+        match joint_kind(j)? {
             None => in_body *= origin,
             Some(kind) => {
-                let axis = Vector3::from(j.axis.xyz.0);
-                if !axis.iter().all(|v| v.is_finite()) || axis.norm() < 1e-9 {
-                    return Err(err(format!(
-                        "joint '{}' has a zero or invalid axis",
-                        j.name
-                    )));
-                }
-                let (lower, upper) = match j.joint_type {
-                    urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-                    _ => (j.limit.lower, j.limit.upper),
-                };
-                // urdf-rs reads a missing `<limit>` as [0, 0]: a joint that cannot move, never meant.
-                if j.joint_type != urdf_rs::JointType::Continuous && lower == 0.0 && upper == 0.0 {
-                    return Err(err(format!(
-                        "joint '{}' has no <limit> (or limits [0, 0]): a {} joint needs lower and upper \
-                         limits (an unlimited revolute joint is type=\"continuous\")",
-                        j.name,
-                        if kind == JointKind::Prismatic {
-                            "prismatic"
-                        } else {
-                            "revolute"
-                        }
-                    )));
-                }
-                if lower.is_nan() || upper.is_nan() || lower > upper {
-                    return Err(err(format!(
-                        "joint '{}' has limits [{lower}, {upper}]",
-                        j.name
-                    )));
-                }
-                joints.push(Joint {
-                    name: j.name.clone(),
-                    kind,
-                    origin: in_body * origin,
-                    axis: Unit::new_normalize(axis),
-                    lower,
-                    upper,
-                    effort: j.limit.effort,
-                    velocity: if j.limit.velocity > 0.0 && j.limit.velocity.is_finite() {
-                        j.limit.velocity
-                    } else {
-                        f64::INFINITY
-                    },
-                });
-                bodies.push(Body {
-                    links: Vec::new(),
-                    inertial: Inertial::ZERO,
-                    colliders: Vec::new(),
-                });
+                joints.push(movable_joint(j, kind, in_body * origin)?);
+                bodies.push(empty_body());
                 in_body = Isometry3::identity();
             }
         }
@@ -269,21 +254,105 @@ pub fn load_str(xml: &str, origin: &str, flange_link: Option<&str>) -> Result<Ch
             flange = Some(in_body);
         }
     }
-    let Some(flange) = flange else {
-        return Err(err(format!(
-            "flange link '{flange_name}' is not on the chain"
-        )));
-    };
-    if joints.is_empty() {
-        return Err(err("no movable joint".into()));
-    }
-    Ok(Chain {
-        name: robot.name.clone(),
-        base: Isometry3::identity(),
+    Ok(Assembled {
         joints,
         bodies,
         flange,
-        flange_link: flange_name,
+    })
+}
+
+fn empty_body() -> Body {
+    Body {
+        links: Vec::new(),
+        inertial: Inertial::ZERO,
+        colliders: Vec::new(),
+    }
+}
+
+/// Merges `link`, at `pose` in the last body's frame, into the last body: its name, inertial and colliders.
+fn attach(
+    bodies: &mut [Body],
+    link: &urdf_rs::Link,
+    pose: &Isometry3<f64>,
+) -> std::result::Result<(), String> {
+    let body = bodies.last_mut().expect("bodies start non-empty");
+    body.links.push(link.name.clone());
+    let inertial = link_inertial(link).map_err(|m| format!("link '{}': {m}", link.name))?;
+    body.inertial = body.inertial.combined(&inertial.transformed(pose));
+    for c in &link.collision {
+        let local = pose_of(&c.origin).map_err(|m| format!("link '{}': {m}", link.name))?;
+        if let Some(shape) =
+            shape_of(&c.geometry).map_err(|m| format!("link '{}': {m}", link.name))?
+        {
+            body.colliders.push(Collider {
+                origin: pose * local,
+                shape,
+                link: link.name.clone(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The kind of a URDF joint: `None` for a fixed one; refused for the types a serial chain does not hold.
+fn joint_kind(j: &urdf_rs::Joint) -> std::result::Result<Option<JointKind>, String> {
+    match j.joint_type {
+        urdf_rs::JointType::Fixed => Ok(None),
+        urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+            Ok(Some(JointKind::Revolute))
+        }
+        urdf_rs::JointType::Prismatic => Ok(Some(JointKind::Prismatic)),
+        ref other => Err(format!(
+            "joint '{}' has type {other:?}; only revolute, continuous, prismatic and fixed are supported",
+            j.name
+        )),
+    }
+}
+
+/// The chain joint of the movable URDF joint `j` of `kind`, at `origin` in its parent body's frame, with its axis
+/// and limits checked.
+fn movable_joint(
+    j: &urdf_rs::Joint,
+    kind: JointKind,
+    origin: Isometry3<f64>,
+) -> std::result::Result<Joint, String> {
+    let axis = Vector3::from(j.axis.xyz.0);
+    if !axis.iter().all(|v| v.is_finite()) || axis.norm() < 1e-9 {
+        return Err(format!("joint '{}' has a zero or invalid axis", j.name));
+    }
+    let (lower, upper) = match j.joint_type {
+        urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+        _ => (j.limit.lower, j.limit.upper),
+    };
+    // urdf-rs reads a missing `<limit>` as [0, 0]: a joint that cannot move, never meant.
+    if j.joint_type != urdf_rs::JointType::Continuous && lower == 0.0 && upper == 0.0 {
+        return Err(format!(
+            "joint '{}' has no <limit> (or limits [0, 0]): a {} joint needs lower and upper \
+             limits (an unlimited revolute joint is type=\"continuous\")",
+            j.name,
+            if kind == JointKind::Prismatic {
+                "prismatic"
+            } else {
+                "revolute"
+            }
+        ));
+    }
+    if lower.is_nan() || upper.is_nan() || lower > upper {
+        return Err(format!("joint '{}' has limits [{lower}, {upper}]", j.name));
+    }
+    Ok(Joint {
+        name: j.name.clone(),
+        kind,
+        origin,
+        axis: Unit::new_normalize(axis),
+        lower,
+        upper,
+        effort: j.limit.effort,
+        velocity: if j.limit.velocity > 0.0 && j.limit.velocity.is_finite() {
+            j.limit.velocity
+        } else {
+            f64::INFINITY
+        },
     })
 }
 
@@ -376,66 +445,6 @@ fn shape_of(g: &urdf_rs::Geometry) -> std::result::Result<Option<Shape>, String>
 /// (rapier's among them) drop a fixed joint from an empty root link. A caller that needs the base pose
 /// expresses gravity in the base frame instead.
 pub fn to_urdf_string(chain: &Chain, payload: &super::chain::Payload) -> Result<String> {
-    let pose = |iso: &Isometry3<f64>| {
-        let (r, p, y) = iso.rotation.euler_angles();
-        let t = iso.translation.vector;
-        urdf_rs::Pose {
-            xyz: urdf_rs::Vec3([t.x, t.y, t.z]),
-            rpy: urdf_rs::Vec3([r, p, y]),
-        }
-    };
-    let link = |name: String, inertial: &Inertial| {
-        let i = &inertial.inertia;
-        urdf_rs::Link {
-            name,
-            inertial: urdf_rs::Inertial {
-                origin: pose(&Isometry3::translation(
-                    inertial.com.x,
-                    inertial.com.y,
-                    inertial.com.z,
-                )),
-                mass: urdf_rs::Mass {
-                    value: inertial.mass,
-                },
-                inertia: urdf_rs::Inertia {
-                    ixx: i[(0, 0)],
-                    ixy: i[(0, 1)],
-                    ixz: i[(0, 2)],
-                    iyy: i[(1, 1)],
-                    iyz: i[(1, 2)],
-                    izz: i[(2, 2)],
-                },
-            },
-            visual: Vec::new(),
-            collision: Vec::new(),
-        }
-    };
-    let joint = |name: String,
-                 joint_type: urdf_rs::JointType,
-                 origin: &Isometry3<f64>,
-                 parent: &str,
-                 child: &str,
-                 axis: Vector3<f64>,
-                 limit: urdf_rs::JointLimit| urdf_rs::Joint {
-        name,
-        joint_type,
-        origin: pose(origin),
-        parent: urdf_rs::LinkName {
-            link: parent.to_string(),
-        },
-        child: urdf_rs::LinkName {
-            link: child.to_string(),
-        },
-        axis: urdf_rs::Axis {
-            xyz: urdf_rs::Vec3([axis.x, axis.y, axis.z]),
-        },
-        limit,
-        calibration: None,
-        dynamics: None,
-        mimic: None,
-        safety_controller: None,
-    };
-
     let body_name = |i: usize| {
         chain.bodies[i]
             .links
@@ -456,33 +465,12 @@ pub fn to_urdf_string(chain: &Chain, payload: &super::chain::Payload) -> Result<
             };
             inertial = inertial.combined(&load);
         }
-        links.push(link(body_name(i), &inertial));
+        links.push(urdf_link(body_name(i), &inertial));
         if i > 0 {
-            let j = &chain.joints[i - 1];
-            let (joint_type, lower, upper) =
-                match (j.kind, j.lower.is_finite() && j.upper.is_finite()) {
-                    (JointKind::Prismatic, _) => (urdf_rs::JointType::Prismatic, j.lower, j.upper),
-                    (JointKind::Revolute, true) => (urdf_rs::JointType::Revolute, j.lower, j.upper),
-                    (JointKind::Revolute, false) => (urdf_rs::JointType::Continuous, 0.0, 0.0),
-                };
-            joints.push(joint(
-                j.name.clone(),
-                joint_type,
-                &j.origin,
+            joints.push(urdf_joint(
+                &chain.joints[i - 1],
                 &body_name(i - 1),
                 &body_name(i),
-                j.axis.into_inner(),
-                urdf_rs::JointLimit {
-                    lower,
-                    upper,
-                    effort: j.effort,
-                    velocity: if j.velocity.is_finite() {
-                        j.velocity
-                    } else {
-                        1.0
-                    },
-                    ..Default::default()
-                },
             ));
         }
     }
@@ -497,4 +485,81 @@ pub fn to_urdf_string(chain: &Chain, payload: &super::chain::Payload) -> Result<
         origin: chain.name.clone(),
         message: format!("cannot write: {e}"),
     })
+}
+
+fn urdf_pose(iso: &Isometry3<f64>) -> urdf_rs::Pose {
+    let (r, p, y) = iso.rotation.euler_angles();
+    let t = iso.translation.vector;
+    urdf_rs::Pose {
+        xyz: urdf_rs::Vec3([t.x, t.y, t.z]),
+        rpy: urdf_rs::Vec3([r, p, y]),
+    }
+}
+
+/// A URDF link of a body: its merged inertial, no geometry.
+fn urdf_link(name: String, inertial: &Inertial) -> urdf_rs::Link {
+    let i = &inertial.inertia;
+    urdf_rs::Link {
+        name,
+        inertial: urdf_rs::Inertial {
+            origin: urdf_pose(&Isometry3::translation(
+                inertial.com.x,
+                inertial.com.y,
+                inertial.com.z,
+            )),
+            mass: urdf_rs::Mass {
+                value: inertial.mass,
+            },
+            inertia: urdf_rs::Inertia {
+                ixx: i[(0, 0)],
+                ixy: i[(0, 1)],
+                ixz: i[(0, 2)],
+                iyy: i[(1, 1)],
+                iyz: i[(1, 2)],
+                izz: i[(2, 2)],
+            },
+        },
+        visual: Vec::new(),
+        collision: Vec::new(),
+    }
+}
+
+/// The URDF joint of chain joint `j` between the links `parent` and `child`: a revolute joint without finite
+/// limits is written as continuous, an unlimited velocity as 1 rad/s.
+fn urdf_joint(j: &Joint, parent: &str, child: &str) -> urdf_rs::Joint {
+    let (joint_type, lower, upper) = match (j.kind, j.lower.is_finite() && j.upper.is_finite()) {
+        (JointKind::Prismatic, _) => (urdf_rs::JointType::Prismatic, j.lower, j.upper),
+        (JointKind::Revolute, true) => (urdf_rs::JointType::Revolute, j.lower, j.upper),
+        (JointKind::Revolute, false) => (urdf_rs::JointType::Continuous, 0.0, 0.0),
+    };
+    let axis = j.axis.into_inner();
+    urdf_rs::Joint {
+        name: j.name.clone(),
+        joint_type,
+        origin: urdf_pose(&j.origin),
+        parent: urdf_rs::LinkName {
+            link: parent.to_string(),
+        },
+        child: urdf_rs::LinkName {
+            link: child.to_string(),
+        },
+        axis: urdf_rs::Axis {
+            xyz: urdf_rs::Vec3([axis.x, axis.y, axis.z]),
+        },
+        limit: urdf_rs::JointLimit {
+            lower,
+            upper,
+            effort: j.effort,
+            velocity: if j.velocity.is_finite() {
+                j.velocity
+            } else {
+                1.0
+            },
+            ..Default::default()
+        },
+        calibration: None,
+        dynamics: None,
+        mimic: None,
+        safety_controller: None,
+    }
 }
