@@ -7,7 +7,7 @@
 use std::time::{Duration, Instant};
 
 use calibench::calib::method::FitContext;
-use calibench::calib::registry::{MethodKind, fit};
+use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::{Dataset, Split, random_split};
 use calibench::robot::dh::DhChain;
@@ -51,7 +51,7 @@ fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool) {
             .map(|_| {
                 let t = Instant::now();
                 single
-                    .install(|| fit(kind, &ctx, &train, &val))
+                    .install(|| kind.fit(&ctx, &train, &val))
                     .expect("fits");
                 t.elapsed()
             })

@@ -91,7 +91,7 @@ fn main() {
         .map(|_| {
             let t = Instant::now();
             // The selector is built inside the timing, as a campaign that needs it builds it.
-            let ctx = calibench::eval::accuracy::fit_context(&sim.world);
+            let ctx = calibench::calib::method::FitContext::of(&sim.world);
             let selector = DOptimal::for_selection(
                 &scenario.campaign.selection,
                 &ctx,

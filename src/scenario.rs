@@ -80,7 +80,7 @@ impl Scenario {
                                 && !k.starts_with('[')
                                 && !e.message().contains(&format!("`{k}`"))
                         })
-                        .map(|k| format!("`{k}`: "))
+                        .map(|k| format!("`{}{k}`: ", section_of(before)))
                         .unwrap_or_default();
                     format!("line {line}, column {column}: {key}")
                 })
@@ -195,6 +195,17 @@ fn selection_model(name: &str) -> std::result::Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The table a line of `before`'s end belongs to, as a key prefix (`study.`, `regions.`); empty at the top.
+fn section_of(before: &str) -> String {
+    before
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim())
+        .map_or(String::new(), |s| format!("{s}."))
 }
 
 fn resolve(path: &Path, scenario_dir: Option<&Path>) -> PathBuf {

@@ -5,7 +5,7 @@ use crate::common::synthetic::{Extra, mean, noise_mean, synthetic};
 
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::FitContext;
-use calibench::calib::registry::{MethodKind, fit};
+use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::robot::Payload;
 use nalgebra::Point3;
@@ -37,7 +37,9 @@ fn fit_constant_errors(cross_terms: bool) -> Outcome {
             ..RegressionOptions::default()
         },
     };
-    let model = fit(MethodKind::PaperRotxyzTransxyz, &ctx, &train, &val).unwrap();
+    let model = MethodKind::PaperRotxyzTransxyz
+        .fit(&ctx, &train, &val)
+        .unwrap();
     let registration = model.registration();
     let obs = registration.observe(&test).unwrap();
     let true_points: Vec<Vec<Point3<f64>>> = s.truth[900..].iter().map(|p| vec![*p]).collect();

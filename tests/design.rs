@@ -13,7 +13,7 @@ use calibench::design::{DesignModel, Indices, SelectOptions, d_optimal};
 use calibench::robot::Chain;
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;
-use calibench::study::sweep::Progress;
+use calibench::study::sweep::RunOptions;
 use nalgebra::{DMatrix, Point3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -184,7 +184,7 @@ closed_loop_points = 5
 "#;
     let text = GEOMETRIC.split("[evaluation]").next().unwrap().to_string() + study;
     let scenario = Scenario::parse(&text, "geometric_only study").unwrap();
-    let result = run_study(&scenario, Progress::Hidden).unwrap();
+    let result = run_study(&scenario, RunOptions::QUIET).unwrap();
     let median = |layout: &str| {
         let mut v: Vec<f64> = result
             .runs
@@ -253,12 +253,12 @@ closed_loop_points = 0
 "#;
     let text = GEOMETRIC.split("[evaluation]").next().unwrap().to_string() + study;
     let scenario = Scenario::parse(&text, "per-method design").unwrap();
-    let result = run_study(&scenario, Progress::Hidden).unwrap();
+    let result = run_study(&scenario, RunOptions::QUIET).unwrap();
     let run = |layout: &str, method: &str| {
         result
             .runs
             .iter()
-            .find(|r| r.key.distribution.name() == layout && r.key.method == method)
+            .find(|r| r.key.distribution.name() == layout && r.key.method.name() == method)
             .unwrap_or_else(|| panic!("{layout} {method}"))
     };
     let floor = |layout: &str, method: &str| run(layout, method).floor_mean.unwrap();

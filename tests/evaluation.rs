@@ -10,12 +10,12 @@ use std::sync::OnceLock;
 
 use calibench::app::simulate;
 use calibench::calib::method::{FitContext, Fitted};
-use calibench::calib::registry::{self, MethodKind};
+use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::campaign::Simulation;
-use calibench::eval::accuracy::{
-    EvaluationConfig, GroundTruth, closed_loop_errors, split_campaign, test_errors, truth_errors,
-};
+use calibench::eval::GroundTruth;
+use calibench::eval::accuracy::{EvaluationConfig, split_campaign};
+use calibench::eval::judge::{closed_loop_errors, test_errors, truth_errors};
 use calibench::eval::{Oracle, centre};
 use calibench::robot::dh::DhChain;
 use calibench::scenario::Scenario;
@@ -69,7 +69,7 @@ fn fixture(text: &str) -> Fixture {
         &sim.world,
         &scenario.campaign,
         &scenario.regions,
-        &small_config(),
+        &small_config().ground_truth(),
     )
     .unwrap();
     assert!(truth.grid.points.len() > 100, "{}", truth.grid.points.len());
@@ -123,7 +123,7 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
     };
-    let model = registry::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
+    let model = MethodKind::Nominal.fit(&ctx, &train, &val).unwrap();
     let model = model.as_ref();
     let points = &f.truth.grid.points;
     let errors = truth_errors(model, &f.truth, points);
@@ -176,7 +176,7 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
         payload: f.scenario.robot.payload(),
         regression: RegressionOptions::default(),
     };
-    let nominal = registry::fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
+    let nominal = MethodKind::Nominal.fit(&ctx, &train, &val).unwrap();
     let e = closed_loop_errors(nominal.as_ref(), &f.truth, &f.sim.world.robot, points);
     assert_eq!(e.failed, 0, "{:?}", e.first_failure);
     let mean = e.position.iter().sum::<f64>() / e.position.len() as f64;
@@ -260,7 +260,7 @@ fn campaign_writes_evaluation_json_with_every_method() {
     assert_eq!(methods.len(), listed.len() + 1, "one entry per method");
     for (entry, name) in methods
         .iter()
-        .zip(listed.iter().map(String::as_str).chain(["oracle"]))
+        .zip(listed.iter().map(|m| m.name()).chain(["oracle"]))
     {
         assert_eq!(entry["method"], name);
         match entry["status"].as_str() {

@@ -6,7 +6,7 @@ use crate::common::synthetic::{Extra, NOISE, mean, noise_mean, synthetic_with_no
 
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::FitContext;
-use calibench::calib::registry::{MethodKind, fit};
+use calibench::calib::registry::MethodKind;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -59,7 +59,8 @@ fn a_reflector_on_the_last_axis_is_calibrated_like_one_off_it() {
                         noise * 1e6,
                         kind.name()
                     );
-                    let model = fit(kind, &ctx, &s.data.subset(&train), &s.data.subset(&val))
+                    let model = kind
+                        .fit(&ctx, &s.data.subset(&train), &s.data.subset(&val))
                         .unwrap_or_else(|e| panic!("{what}: {e}"));
                     let data = s.data.subset(&test);
                     let reg = model.registration();
@@ -95,13 +96,13 @@ fn a_reflector_on_the_last_axis_is_calibrated_like_one_off_it() {
                         assert!(u["reason"].as_str().unwrap().len() > 40, "{what}: {u}");
                     }
                     // Too few points for every parameter is not a failure: a smaller set, reported.
-                    let few = fit(
-                        kind,
-                        &ctx,
-                        &s.data.subset(&range(0, 15)),
-                        &s.data.subset(&range(400, 408)),
-                    )
-                    .unwrap_or_else(|e| panic!("{what}, 15 points: {e}"));
+                    let few = kind
+                        .fit(
+                            &ctx,
+                            &s.data.subset(&range(0, 15)),
+                            &s.data.subset(&range(400, 408)),
+                        )
+                        .unwrap_or_else(|e| panic!("{what}, 15 points: {e}"));
                     assert!(
                         few.predict(&s.data.q[600])
                             .position

@@ -10,7 +10,7 @@ use calibench::calib::error_model::{
 };
 use calibench::calib::kinematic::{GravityModel, KinematicModel, KinematicOptions};
 use calibench::calib::method::{FitContext, Fitted};
-use calibench::calib::registry::{MethodKind, Save, SavedModel, fit};
+use calibench::calib::registry::{MethodKind, Save, SavedModel};
 use calibench::calib::regression::RegressionOptions;
 use calibench::dataset::Dataset;
 use calibench::robot::dh::DhChain;
@@ -185,7 +185,7 @@ fn the_saved_model_predicts_the_same() {
     );
     let ctx = context(&s.chain, &s.dh, PAYLOAD);
     for kind in [MethodKind::Kinematic, MethodKind::Elastic] {
-        let model = fit(kind, &ctx, &train, &val).unwrap();
+        let model = kind.fit(&ctx, &train, &val).unwrap();
         let json = serde_json::to_string(&model.save().unwrap()).unwrap();
         let back = serde_json::from_str::<SavedModel>(&json)
             .unwrap()
@@ -352,7 +352,8 @@ fn non_convergence_and_bad_data_are_errors() {
     assert!(msg.contains("did not converge"), "{msg}");
     let mut bad = train.clone();
     bad.measured[17][0].y = f64::NAN;
-    let msg = fit(MethodKind::Elastic, &ctx, &bad, &val)
+    let msg = MethodKind::Elastic
+        .fit(&ctx, &bad, &val)
         .err()
         .expect("NaN in the data")
         .to_string();

@@ -13,7 +13,7 @@ use nalgebra::{Matrix3, Point3, Rotation3, UnitQuaternion};
 use tempfile::TempDir;
 
 use calibench::calib::method::FitContext;
-use calibench::calib::registry::{self, MethodKind};
+use calibench::calib::registry::MethodKind;
 use calibench::calib::tracker_frame::Registration;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::dataset::{Dataset, Split, random_train_val};
@@ -319,7 +319,7 @@ fn the_readme_c_to_d_numbers_reproduce() {
         (MethodKind::Kinematic, 0.6945264),
         (MethodKind::Elastic, 0.4970997),
     ] {
-        let model = registry::fit(kind, &ctx, &train, &val).unwrap();
+        let model = kind.fit(&ctx, &train, &val).unwrap();
         let t = transfer::evaluate(model.as_ref(), &d, TestRegistration::Refit).unwrap();
         // D keeps the tool axis along -y at every point: the probe's axial position is not refitted.
         assert_eq!(t.mounting_directions, 2, "{}", t.describe());
@@ -369,7 +369,7 @@ fn the_protocol_reproduces_the_readme_c_to_d_means() {
         ("kinematic", 0.6945264),
         ("elastic", 0.4970997),
     ]) {
-        assert_eq!(row.method, method);
+        assert_eq!(row.method.name(), method);
         assert!(row.inputs.is_empty(), "{method}: {:?}", row.inputs);
         let s = &row.scores[0];
         assert_eq!((s.test.as_str(), s.n), ("D", 632));
@@ -411,7 +411,7 @@ fn the_probe_orientation_is_modelled() {
     let (train, val, test) = (pick(Split::Train), pick(Split::Val), pick(Split::Test));
     let ctx = FitContext::new(&chain, &dh);
     let mean_angle = |kind: MethodKind| -> f64 {
-        let model = registry::fit(kind, &ctx, &train, &val).unwrap();
+        let model = kind.fit(&ctx, &train, &val).unwrap();
         assert_eq!(
             model.models_orientation(),
             kind != MethodKind::Nominal,

@@ -3,6 +3,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::DistributionKind;
 use calibench::eval::Stats;
 use calibench::report::recording::{self, arrow_factor};
@@ -28,6 +29,10 @@ use rerun::log::{Chunk, LogMsg};
 const SIZES: [usize; 3] = [10, 20, 40];
 const SEEDS: u64 = 3;
 const METHODS: [&str; 2] = ["kinematic", "residual-ridge"];
+
+fn kind(name: &str) -> MethodKind {
+    MethodKind::parse(name).unwrap()
+}
 const DISTRIBUTIONS: [DistributionKind; 2] = [DistributionKind::Uniform, DistributionKind::Sobol];
 const N_POINTS: usize = 7;
 const N_GRID: usize = 12;
@@ -61,7 +66,7 @@ fn study(chain: &Chain) -> StudyResult {
                         key: RunKey {
                             region: region.clone(),
                             distribution,
-                            method: method.to_string(),
+                            method: kind(method),
                             n_train,
                             seed,
                         },
@@ -113,7 +118,7 @@ fn study(chain: &Chain) -> StudyResult {
         .iter()
         .map(|m| {
             (
-                m.to_string(),
+                kind(m),
                 BeforeAfter {
                     before: points.iter().map(|p| p.error_before.norm()).collect(),
                     after: points.iter().map(|p| p.error_after.norm()).collect(),
@@ -128,7 +133,7 @@ fn study(chain: &Chain) -> StudyResult {
     let detail = Detail {
         region: region.clone(),
         distribution: DistributionKind::Uniform,
-        method: METHODS[0].to_string(),
+        method: kind(METHODS[0]),
         n_train: SIZES[2],
         points,
         grid,
@@ -139,7 +144,7 @@ fn study(chain: &Chain) -> StudyResult {
     let config = StudyConfig {
         sizes: SIZES.to_vec(),
         distributions: DISTRIBUTIONS.to_vec(),
-        methods: METHODS.iter().map(|m| m.to_string()).collect(),
+        methods: METHODS.iter().map(|m| kind(m)).collect(),
         seeds: SEEDS,
         validation_ratio: 0.5,
         test_points: 10,
@@ -690,7 +695,8 @@ fn recording_shows_the_trajectory_and_the_tracker_time_comparison() {
             for (k, speed) in speeds.iter().enumerate() {
                 study.trajectory.push(TrajectoryRun {
                     region: region.clone(),
-                    method: method.to_string(),
+                    method: kind(method),
+                    motion_inputs: false,
                     speed: *speed,
                     n_targets: n,
                     seed,
@@ -714,7 +720,7 @@ fn recording_shows_the_trajectory_and_the_tracker_time_comparison() {
         .collect();
     study.trajectory_detail = Some(TrajectoryDetail {
         region: region.clone(),
-        method: METHODS[0].into(),
+        method: kind(METHODS[0]),
         speed: 1.0,
         n_targets: n,
         samples,

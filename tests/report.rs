@@ -4,6 +4,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::DistributionKind;
 use calibench::design::Indices;
 use calibench::eval::Stats;
@@ -55,7 +56,10 @@ pub fn study(orientation: bool) -> StudyResult {
     let config = StudyConfig {
         sizes: SIZES.to_vec(),
         distributions: distributions.to_vec(),
-        methods: methods.iter().map(|m| m.to_string()).collect(),
+        methods: methods
+            .iter()
+            .map(|m| MethodKind::parse(m).unwrap())
+            .collect(),
         seeds: SEEDS,
         validation_ratio: 0.5,
         test_points: 500,
@@ -88,7 +92,7 @@ pub fn study(orientation: bool) -> StudyResult {
                             key: RunKey {
                                 region: region.name.clone(),
                                 distribution: d,
-                                method: m.to_string(),
+                                method: MethodKind::parse(m).unwrap(),
                                 n_train: n,
                                 seed,
                             },
@@ -130,7 +134,7 @@ pub fn study(orientation: bool) -> StudyResult {
             .map(|b| scale * b * (0.5 + rng.random::<f64>()))
             .collect();
         histograms.insert(
-            m.to_string(),
+            MethodKind::parse(m).unwrap(),
             BeforeAfter {
                 before: before.clone(),
                 after,
@@ -141,7 +145,7 @@ pub fn study(orientation: bool) -> StudyResult {
         detail: Detail {
             region: regions[0].name.clone(),
             distribution: DistributionKind::Uniform,
-            method: "elastic".into(),
+            method: MethodKind::Elastic,
             n_train: 240,
             points: Vec::new(),
             grid: Vec::new(),
@@ -285,7 +289,7 @@ fn metrics_rows_hold_millimetres_and_failures_leave_empty_cells() {
     // Rows follow the run order.
     for (row, run) in rows.iter().zip(&s.runs) {
         assert_eq!(row["scenario"], "paper_iiwa");
-        assert_eq!(row["method"], run.key.method);
+        assert_eq!(row["method"], run.key.method.name());
         assert_eq!(row["seed"], run.key.seed.to_string());
         assert_eq!(row["distribution"], run.key.distribution.name());
         assert_eq!(row["fit_ms"], format!("{:.1}", run.fit_ms));
@@ -469,7 +473,7 @@ fn points_needed_is_the_first_size_near_both_plateau_and_floor() {
     let find = |m: &str, d: DistributionKind| {
         let c = curves
             .iter()
-            .find(|c| c.method == m && c.distribution == d)
+            .find(|c| c.method.name() == m && c.distribution == d)
             .unwrap();
         points_needed(&c.points)
     };

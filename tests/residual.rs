@@ -6,9 +6,9 @@ use crate::common::synthetic::{self as fixture, Extra, Field, Synthetic, mean, n
 
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::{FitContext, Fitted};
-use calibench::calib::registry::{MethodKind, Save, SavedModel, fit, fit_hybrid};
+use calibench::calib::registry::{MethodKind, Save, SavedModel};
 use calibench::calib::regression::RegressionOptions;
-use calibench::calib::residual::ResidualModel;
+use calibench::calib::residual::{Hybrid, ResidualModel};
 use calibench::calib::tracker_frame::Observation;
 use calibench::dataset::Dataset;
 use calibench::robot::Payload;
@@ -98,8 +98,8 @@ fn residual_ridge_models_a_smooth_field_of_two_joints_to_the_noise_level() {
     let s = synthetic(&vec![[0.0; 6]; 7], field, false, 2000, 1);
     let (train, val, test) = splits(&s);
     let ctx = ctx(&s, false);
-    let model = fit(MethodKind::ResidualRidge, &ctx, &train, &val).unwrap();
-    let nominal = fit(MethodKind::Nominal, &ctx, &train, &val).unwrap();
+    let model = MethodKind::ResidualRidge.fit(&ctx, &train, &val).unwrap();
+    let nominal = MethodKind::Nominal.fit(&ctx, &train, &val).unwrap();
     assert_eq!(model.method(), "residual-ridge");
     assert!(!model.models_orientation());
     let obs = model.registration().observe(&test).unwrap();
@@ -159,7 +159,11 @@ fn hybrid_removes_most_of_the_smooth_residual_its_base_leaves() {
         let s = synthetic(&errors, field, false, 2000, 2);
         let (train, val, test) = splits(&s);
         let ctx = ctx(&s, cross);
-        let hybrid = fit_hybrid(base, &ctx, &train, &val).unwrap();
+        let hybrid = Hybrid {
+            base: base.method(),
+        }
+        .fit_hybrid(&ctx, &train, &val)
+        .unwrap();
         assert_eq!(hybrid.method(), format!("hybrid-{}", base.name()));
         assert_eq!(hybrid.base().method(), base.name());
         let obs = hybrid.registration().observe(&test).unwrap();
@@ -215,7 +219,11 @@ fn hybrid_is_never_worse_than_its_base_on_the_validation_data() {
             let s = synthetic(&constant_errors(), f, false, n, 10 + seed as u64);
             let (train, val, _) = splits(&s);
             let ctx = ctx(&s, cross);
-            let hybrid = fit_hybrid(base, &ctx, &train, &val).unwrap();
+            let hybrid = Hybrid {
+                base: base.method(),
+            }
+            .fit_hybrid(&ctx, &train, &val)
+            .unwrap();
             let obs = hybrid.registration().observe(&val).unwrap();
             let (b, h) = (mean_error(hybrid.base(), &obs), mean_error(&hybrid, &obs));
             let (b_rms, h_rms) = (rms_error(hybrid.base(), &obs), rms_error(&hybrid, &obs));
@@ -304,7 +312,11 @@ fn saved_models_predict_identically_after_a_json_round_trip() {
     );
     assert!(modelled < 0.5 * nominal, "{modelled} vs nominal {nominal}");
 
-    let hybrid = fit_hybrid(MethodKind::PaperRotz, &ctx, &train, &val).unwrap();
+    let hybrid = Hybrid {
+        base: MethodKind::PaperRotz.method(),
+    }
+    .fit_hybrid(&ctx, &train, &val)
+    .unwrap();
     assert!(hybrid.models_orientation());
     let json = serde_json::to_value(hybrid.save().unwrap()).unwrap();
     assert_eq!(json["model"], "hybrid");
@@ -323,7 +335,7 @@ fn hybrid_methods_name_their_base() {
         (MethodKind::HybridKinematic, MethodKind::Kinematic),
     ] {
         // Until the base method exists, the hybrid fails with the base's error.
-        match (fit(kind, &ctx, &train, &val), fit(base, &ctx, &train, &val)) {
+        match (kind.fit(&ctx, &train, &val), base.fit(&ctx, &train, &val)) {
             (Ok(h), Ok(b)) => {
                 assert_eq!(h.method(), kind.name());
                 assert_eq!(b.method(), base.name());
@@ -338,6 +350,12 @@ fn hybrid_methods_name_their_base() {
         }
     }
     let empty = train.subset(&[]);
-    assert!(fit(MethodKind::ResidualRidge, &ctx, &train, &empty).is_err());
-    assert!(fit_hybrid(MethodKind::Nominal, &ctx, &empty, &val).is_err());
+    assert!(MethodKind::ResidualRidge.fit(&ctx, &train, &empty).is_err());
+    assert!(
+        Hybrid {
+            base: MethodKind::Nominal.method()
+        }
+        .fit_hybrid(&ctx, &empty, &val)
+        .is_err()
+    );
 }

@@ -10,7 +10,7 @@ use proptest::prelude::*;
 use calibench::calib::error_model::FrameErrors;
 use calibench::calib::method::FitContext;
 use calibench::calib::method::Fitted;
-use calibench::calib::registry::{self, MethodKind, SavedModel};
+use calibench::calib::registry::{MethodKind, SavedModel};
 use calibench::dataset::Dataset;
 use calibench::dataset::range::JointRange;
 use calibench::robot::dh::DhChain;
@@ -92,7 +92,7 @@ fn fitted() -> &'static Fitted2 {
         let ctx = FitContext::new(&s.chain, &s.dh);
         let models: Vec<Box<dyn Fitted>> = [MethodKind::PaperRotxyz, MethodKind::ResidualRidge]
             .into_iter()
-            .map(|m| registry::fit(m, &ctx, &train, &val).unwrap())
+            .map(|m| m.fit(&ctx, &train, &val).unwrap())
             .collect();
         let saved = models
             .iter()

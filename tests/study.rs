@@ -7,9 +7,10 @@ use crate::common::edit;
 use std::sync::OnceLock;
 
 use calibench::app::run_study;
+use calibench::calib::registry::MethodKind;
 use calibench::campaign::DistributionKind;
 use calibench::scenario::Scenario;
-use calibench::study::sweep::Progress;
+use calibench::study::sweep::RunOptions;
 use calibench::study::{RunMetrics, StudyResult};
 
 const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
@@ -49,7 +50,7 @@ fn run_on(threads: usize, text: &str) -> StudyResult {
         .num_threads(threads)
         .build()
         .unwrap()
-        .install(|| run_study(&scenario, Progress::Hidden))
+        .install(|| run_study(&scenario, RunOptions::QUIET))
         .unwrap()
 }
 
@@ -94,7 +95,7 @@ fn every_run_is_there_in_config_order_and_failures_carry_their_reason() {
             for m in &c.methods {
                 for &n in &c.sizes {
                     for s in 0..c.seeds {
-                        expected.push((region.name.clone(), d, m.clone(), n, s));
+                        expected.push((region.name.clone(), d, *m, n, s));
                     }
                 }
             }
@@ -108,7 +109,7 @@ fn every_run_is_there_in_config_order_and_failures_carry_their_reason() {
             (
                 k.region.clone(),
                 k.distribution,
-                k.method.clone(),
+                k.method,
                 k.n_train,
                 k.seed,
             )
@@ -118,7 +119,7 @@ fn every_run_is_there_in_config_order_and_failures_carry_their_reason() {
 
     for run in &result.runs {
         let k = &run.key;
-        if k.method == FAILING && k.n_train == 10 {
+        if k.method.name() == FAILING && k.n_train == 10 {
             let reason = run.failure.as_deref().expect("too few points must fail");
             assert!(reason.contains("identif"), "{reason}");
             assert!(run.test.is_none() && run.truth.is_none() && run.floor_mean.is_none());
@@ -149,11 +150,11 @@ fn the_detail_is_the_largest_size_of_the_first_layout_and_seed() {
     let d = &result.detail;
     assert_eq!(d.region, "paper");
     assert_eq!(d.distribution, DistributionKind::Uniform);
-    assert_eq!(d.method, "elastic");
+    assert_eq!(d.method, MethodKind::Elastic);
     assert_eq!(d.n_train, 40);
     assert_eq!(d.points.len(), 40 + 20, "training and validation points");
     assert!(d.grid.len() > 100, "{}", d.grid.len());
-    let names: Vec<&String> = d.histograms.keys().collect();
+    let names: Vec<&MethodKind> = d.histograms.keys().collect();
     assert_eq!(names.len(), 3, "{names:?}");
     for h in d.histograms.values() {
         assert_eq!(h.before.len(), 80);
@@ -171,7 +172,7 @@ fn the_detail_is_the_largest_size_of_the_first_layout_and_seed() {
         .runs
         .iter()
         .find(|r| {
-            r.key.method == "elastic"
+            r.key.method == MethodKind::Elastic
                 && r.key.n_train == 40
                 && r.key.seed == 0
                 && r.key.distribution == DistributionKind::Uniform
@@ -213,11 +214,7 @@ fn the_default_study_parses_and_covers_every_method_and_layout() {
     let scenario = Scenario::parse(DEFAULT, "scenarios/default.toml").unwrap();
     let study = scenario.study.expect("default.toml has a [study]");
     assert_eq!(study.distributions, DistributionKind::ALL.to_vec());
-    let all: Vec<&str> = calibench::calib::registry::MethodKind::ALL
-        .iter()
-        .map(|m| m.name())
-        .collect();
-    assert_eq!(study.methods, all);
+    assert_eq!(study.methods, MethodKind::ALL.to_vec());
     assert!(study.seeds >= 5);
     assert!(study.sizes.first().is_some_and(|&n| n <= 20));
     assert!(study.sizes.last().is_some_and(|&n| n >= 1000));
@@ -317,7 +314,7 @@ fn bad_study_sections_are_refused_naming_the_field() {
 #[test]
 fn a_scenario_without_a_study_has_nothing_to_sweep() {
     let scenario = Scenario::parse(PAPER, "paper").unwrap();
-    let e = run_study(&scenario, Progress::Hidden)
+    let e = run_study(&scenario, RunOptions::QUIET)
         .unwrap_err()
         .to_string();
     assert!(e.contains("no [study]"), "{e}");
@@ -392,14 +389,14 @@ fn errors_by_distance_cover_every_ground_truth_point_and_agree_with_the_grid() {
             let nominal_far = study
                 .runs
                 .iter()
-                .find(|r| r.key.method == "nominal" && r.key.region == "small")
+                .find(|r| r.key.method == MethodKind::Nominal && r.key.region == "small")
                 .and_then(|r| {
                     r.by_distance
                         .iter()
                         .find(|b| b.use_region == "large" && b.to_m.is_infinite())
                 })
                 .unwrap();
-            if run.key.method == "elastic" {
+            if run.key.method == MethodKind::Elastic {
                 assert!(
                     far.mean < 0.2 * nominal_far.mean,
                     "{far:?} vs {nominal_far:?}"

@@ -192,10 +192,12 @@ fn a_known_clock_offset_is_recovered() {
 /// where the motion deflects the arm most.
 #[test]
 fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
+    use calibench::calib::method::FitContext;
     use calibench::calib::motion_inputs::with_motion_inputs;
-    use calibench::calib::registry::{self, MethodKind};
+    use calibench::calib::registry::MethodKind;
+    use calibench::eval::GroundTruth;
     use calibench::eval::Stats;
-    use calibench::eval::accuracy::{GroundTruth, fit_context, truth_errors, truth_errors_with};
+    use calibench::eval::judge::{truth_errors, truth_errors_with};
 
     let s = scenario(60);
     let sim = calibench::app::simulate(&s).unwrap();
@@ -205,7 +207,7 @@ fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
     let measured =
         trajectory::measure(world, &sim.campaign, &s.campaign.posture_rad(), &full, 11).unwrap();
     let data = as_dataset(&measured.campaign, "trajectory").unwrap();
-    let ctx = fit_context(world);
+    let ctx = FitContext::of(world);
     let moving = with_motion_inputs(&data, &world.nominal, &ctx.payload).unwrap();
     let inputs = &moving.extra_inputs.as_ref().unwrap().values;
     // The path starts at rest: no motion torque there.
@@ -218,10 +220,15 @@ fn the_motion_as_inputs_lets_a_regression_describe_the_inertial_deflection() {
     evaluation.grid_points = 300;
     evaluation.shell_points = 0;
     evaluation.closed_loop_points = 0;
-    let truth = GroundTruth::build(world, &s.campaign, &s.regions, &evaluation).unwrap();
+    let truth =
+        GroundTruth::build(world, &s.campaign, &s.regions, &evaluation.ground_truth()).unwrap();
     let kind = MethodKind::parse("paper-rotxyz").unwrap();
-    let plain = registry::fit(kind, &ctx, &data.subset(&train), &data.subset(&val)).unwrap();
-    let with = registry::fit(kind, &ctx, &moving.subset(&train), &moving.subset(&val)).unwrap();
+    let plain = kind
+        .fit(&ctx, &data.subset(&train), &data.subset(&val))
+        .unwrap();
+    let with = kind
+        .fit(&ctx, &moving.subset(&train), &moving.subset(&val))
+        .unwrap();
     assert_eq!(with.input_names().len(), 7);
     let mean = |e: Vec<f64>| Stats::of(&e).unwrap().mean * 1e3;
     let plain_mm = mean(truth_errors(plain.as_ref(), &truth, &truth.grid.points).position);

@@ -12,7 +12,7 @@ use serde_json::{Map, Value};
 use crate::calib::clock::{self, ClockOffset};
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
-use crate::calib::registry::{self, MethodKind, Save, SavedModel};
+use crate::calib::registry::{MethodKind, REFERENCE, Save, SavedModel};
 use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Registration;
 use crate::dataset::mapping::ColumnMapping;
@@ -245,16 +245,19 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         regression: options.regression.clone(),
     };
     let fitting = format!("fitting {}", options.method.info());
-    let model = registry::fit(options.method, &ctx, train, val)
+    let model = options
+        .method
+        .fit(&ctx, train, val)
         .map_err(|e| e.in_data(&data.origin, &fitting))?;
     let model = model.as_ref();
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
     // "Measured" (before) is one number per data set: the nominal kinematics under the nominal model's own
     // registration, whatever the method (a method's refined registration is reported apart).
-    let nominal = match options.method {
-        MethodKind::Nominal => None,
-        _ => Some(registry::fit(MethodKind::Nominal, &ctx, train, val)?),
+    let nominal = if options.method == REFERENCE {
+        None
+    } else {
+        Some(REFERENCE.fit(&ctx, train, val)?)
     };
     let nominal_model = nominal.as_deref().unwrap_or(model);
     let (mut refitted, mut kept) = (0usize, None);

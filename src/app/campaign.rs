@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::eval::{self, Budget, Evaluation, Stats};
 use crate::scenario::Scenario;
 use crate::study::shard::assemble;
-use crate::study::sweep::{self, Progress};
+use crate::study::sweep::{self, Progress, RunOptions};
 use crate::study::{StudyPart, StudyResult};
 use crate::{measurements, output, report};
 
@@ -213,19 +213,19 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         Some(_) => {
             let started = Instant::now();
             let config = super::study_config(&scenario)?;
-            let mut study = match &options.parts {
+            let study = match &options.parts {
                 Some(parts) => assemble(world, &scenario.regions, config, parts.clone()),
                 None => sweep::run_study(
                     world,
                     &scenario.campaign,
                     &scenario.regions,
                     config,
-                    Progress::Auto,
+                    RunOptions {
+                        progress: Progress::Auto,
+                        timings: options.timings,
+                    },
                 )?,
             };
-            if !options.timings {
-                study.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
-            }
             files.extend(report::study_files(&study, &world.nominal)?);
             Some((study, started.elapsed()))
         }

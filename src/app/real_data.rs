@@ -17,13 +17,13 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::calib::method::FitContext;
-use crate::calib::registry::MethodKind;
+use crate::calib::registry::{CLASSICAL, MethodKind, REFERENCE};
 use crate::calib::regression::RegressionOptions;
 use crate::dataset::Dataset;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
 use crate::error::{Error, Result};
-use crate::eval::protocol::{self, CurvePoint, METHODS, Row, Table, TestSet};
+use crate::eval::protocol::{self, CurveDraw, METHODS, Row, Table, TestSet};
 use crate::eval::split::SplitRule;
 use crate::eval::transfer::TestRegistration;
 use crate::eval::{Stats, centre};
@@ -59,7 +59,7 @@ struct Report {
     protocol: serde_json::Value,
     across: Vec<(String, Vec<Row>)>,
     within_c: Vec<Row>,
-    curve: Vec<CurvePoint>,
+    curve: Vec<CurveDraw>,
 }
 
 /// Draws per learning-curve size: each draw fits every method once (about a second on this machine), so
@@ -166,7 +166,7 @@ pub struct Tables {
     pub across: Vec<Table>,
     pub within_c: Table,
     /// Empty without sizes.
-    pub curve: Vec<CurvePoint>,
+    pub curve: Vec<CurveDraw>,
     /// The held-out points of C the curve is tested on.
     pub n_test: usize,
 }
@@ -262,7 +262,7 @@ fn rows_md(table: &Table) -> String {
     // A calibration that makes the arm worse than no calibration (issue 13) is marked where it appears.
     let nominal = rows
         .iter()
-        .find(|r| r.method == MethodKind::Nominal.name() && r.inputs.is_empty());
+        .find(|r| r.method == REFERENCE && r.inputs.is_empty());
     let mut marked = false;
     for r in rows {
         let _ = write!(out, "| {} |", name(r));
@@ -313,7 +313,7 @@ fn rows_md(table: &Table) -> String {
     out
 }
 
-/// The best mean on each test against `kinematic`'s: the margin the README reports.
+/// The best mean on each test against classical calibration's (`kinematic`): the margin the README reports.
 fn best_md(rows: &[Row]) -> String {
     let mut out = String::new();
     for (k, s) in rows[0].scores.iter().enumerate() {
@@ -322,14 +322,18 @@ fn best_md(rows: &[Row]) -> String {
             .iter()
             .min_by(|a, b| mean(a).total_cmp(&mean(b)))
             .expect("rows");
-        if let Some(kin) = rows.iter().find(|r| r.method == "kinematic") {
+        if let Some(kin) = rows
+            .iter()
+            .find(|r| r.method == CLASSICAL && r.inputs.is_empty())
+        {
             let _ = writeln!(
                 out,
-                "{}: best {} at {:.4} mm mean, {:.1} % below `kinematic`'s {:.4} mm.",
+                "{}: best {} at {:.4} mm mean, {:.1} % below `{}`'s {:.4} mm.",
                 s.test,
                 name(best),
                 mean(best),
                 100.0 * (1.0 - mean(best) / mean(kin)),
+                kin.method,
                 mean(kin)
             );
         }
@@ -408,12 +412,7 @@ fn ranges_md(series: &[Dataset], chain: &Chain) -> String {
     out
 }
 
-fn curve_md(
-    methods: &[MethodKind],
-    curve: &[CurvePoint],
-    sizes: &[usize],
-    n_test: usize,
-) -> String {
+fn curve_md(methods: &[MethodKind], curve: &[CurveDraw], sizes: &[usize], n_test: usize) -> String {
     let mut out = format!(
         "\n#### Learning curve: mean position error (mm) on the {n_test} held-out points of series C, \
          mean over draws (min–max)\n\n| method |"
@@ -432,7 +431,7 @@ fn curve_md(
             let of_cell = || {
                 curve
                     .iter()
-                    .filter(move |p| p.method == kind.name() && p.size == n)
+                    .filter(move |p| p.method == *kind && p.size == n)
             };
             let values: Vec<f64> = of_cell().filter_map(|p| p.mean_mm).collect();
             let failed = of_cell().filter(|p| p.mean_mm.is_none()).count();

@@ -21,7 +21,7 @@ use crate::report::metrics::metrics_csv;
 use crate::scenario::Scenario;
 use crate::study::StudyPart;
 use crate::study::shard::{Shard, assemble};
-use crate::study::sweep::{self, Progress};
+use crate::study::sweep::{self, Progress, RunOptions};
 
 /// The files of a shard directory.
 pub const SHARD_OUTPUTS: &[&str] = &["shard.json", "study.cbor", "metrics.csv"];
@@ -84,17 +84,17 @@ pub fn run_shard(
     super::check_study_budget(scenario, threads, long)?;
     let config = super::study_config(scenario)?;
     let world = super::world(scenario)?;
-    let mut part = sweep::run_part(
+    let part = sweep::run_part(
         &world,
         &scenario.campaign,
         &scenario.regions,
         config,
-        Progress::Auto,
+        RunOptions {
+            progress: Progress::Auto,
+            timings,
+        },
         shard,
     )?;
-    if !timings {
-        part.runs.iter_mut().for_each(|r| r.fit_ms = f64::NAN);
-    }
     let manifest = Manifest {
         format: FORMAT.into(),
         scenario_sha256: fingerprint(scenario)?,

@@ -103,7 +103,7 @@ pub fn compare(methods: &[MethodKind], real: &Tables, sim: &Tables, sizes: &[usi
         let v: Vec<f64> = t
             .curve
             .iter()
-            .filter(|p| p.method == m.name() && p.size == n)
+            .filter(|p| p.method == *m && p.size == n)
             .filter_map(|p| p.mean_mm)
             .collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)

@@ -2,9 +2,9 @@
 //! predict the measured point and the flange orientation for joint angles, and invert — the joint command
 //! that makes the calibrated model reach a target, which is what a controller is sent.
 //!
-//! What a method *is* ([`MethodInfo`]) is stated once, as a constant in the method's own file, and asked of it
-//! everywhere else; the list of methods a user can choose is `calib::registry`, which sits above every
-//! method. This file knows no method.
+//! What a method *is* ([`MethodInfo`]) and how it fits ([`Method`]) are stated once, in the method's own file,
+//! and asked of it everywhere else; the list of methods a user can choose is `calib::registry`, which sits
+//! above every method. This file knows no method.
 
 use std::any::Any;
 use std::fmt;
@@ -16,12 +16,14 @@ use super::domain::Domain;
 use super::error_model::ErrorModelKind;
 use super::regression::RegressionOptions;
 use super::tracker_frame::{Observation, Registration};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::numeric;
 use crate::robot::dh::DhChain;
 use crate::robot::kinematics::joint_column;
 use crate::robot::plausible;
 use crate::robot::{Chain, Payload};
+use crate::world::World;
 
 /// What a method is, said once next to the method (a `const` in its file) and asked of it everywhere else.
 #[derive(Debug, PartialEq)]
@@ -88,6 +90,15 @@ impl MethodInfo {
     }
 }
 
+/// A calibration method: what it is and how it fits. Each method's file implements it beside its
+/// [`MethodInfo`]; the registry lists the implementations.
+pub trait Method: Sync {
+    /// What the method is.
+    fn info(&self) -> &'static MethodInfo;
+    /// Fits on `train`, choosing hyper-parameters on `val`.
+    fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>>;
+}
+
 /// What every fitted model holds besides its own parameters: the robot's joints, the nominal kinematics it
 /// corrects and the registration its data are observed through. A model's file writes these fields in its
 /// own object (`#[serde(flatten)]`).
@@ -150,6 +161,15 @@ impl<'a> FitContext<'a> {
             dh,
             payload: Payload::NONE,
             regression: RegressionOptions::default(),
+        }
+    }
+
+    /// What every method fitted in `world` may know: its nominal robot and the payload the user declares —
+    /// none of its truth.
+    pub fn of(world: &'a World) -> FitContext<'a> {
+        FitContext {
+            payload: world.payload(),
+            ..FitContext::new(&world.nominal, &world.dh)
         }
     }
 

@@ -19,7 +19,7 @@ use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
     select_params,
 };
-use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
+use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
@@ -69,6 +69,19 @@ pub fn info_of(kind: Option<ErrorModelKind>) -> &'static MethodInfo {
         Some(ErrorModelKind::RotZ) => &PAPER_ROTZ,
         Some(ErrorModelKind::RotXyz) => &PAPER_ROTXYZ,
         Some(ErrorModelKind::RotXyzTransXyz) => &PAPER_ROTXYZ_TRANSXYZ,
+    }
+}
+
+/// `nominal` (`None`) and the paper's method with each error model: one fitting.
+pub struct Paper(pub Option<ErrorModelKind>);
+
+impl Method for Paper {
+    fn info(&self) -> &'static MethodInfo {
+        info_of(self.0)
+    }
+
+    fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
+        Ok(Box::new(PaperModel::fit(self.0, ctx, train, val)?))
     }
 }
 

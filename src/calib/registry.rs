@@ -2,66 +2,87 @@
 //! methods' files (each of which knows only [`super::method`]); nothing in calib below it imports it.
 //!
 //! What a method is ([`MethodInfo`]: whether it takes extra inputs, has robot parameters, its base, its design
-//! model) is not said here: [`MethodKind::info`] points to the constant in the method's own file.
+//! model) and how it fits ([`Method`]) are not said here: each entry of the list points to the method's own
+//! file. A [`MethodKind`] is the typed value every configuration, run key and report row holds; it is read
+//! from and written as the method's name, here and nowhere else.
 
 use std::any::Any;
+use std::fmt;
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::error_model::ErrorModelKind;
-use super::kinematic::{self, KinematicModel};
-use super::method::{FitContext, Fitted, MethodInfo};
-use super::paper::{self, PaperModel};
-use super::residual::{self, HybridFitted, HybridModel, ResidualCorrection, ResidualModel};
+use super::kinematic::{Kinematic, KinematicModel};
+use super::method::{FitContext, Fitted, Method, MethodInfo};
+use super::paper::{Paper, PaperModel};
+use super::residual::{
+    Hybrid, HybridFitted, HybridModel, ResidualCorrection, ResidualModel, ResidualRidge,
+};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 
-/// The methods a user can fit. `oracle` is not here: it needs the truth, and only the evaluation has it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MethodKind {
-    Nominal,
-    PaperRotz,
-    PaperRotxyz,
-    PaperRotxyzTransxyz,
-    Kinematic,
-    Elastic,
-    ResidualRidge,
-    Hybrid,
-    HybridKinematic,
+/// The list of methods: `Variant => the method`, one line each, in the order reports list them. It makes the
+/// [`MethodKind`] enum, [`MethodKind::ALL`] and [`MethodKind::method`].
+macro_rules! methods {
+    ($($kind:ident => $method:expr,)*) => {
+        /// The methods a user can fit. `oracle` is not here: it needs the truth, and only the evaluation has it.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+        pub enum MethodKind {
+            $($kind,)*
+        }
+
+        impl MethodKind {
+            pub const ALL: [MethodKind; [$(stringify!($kind)),*].len()] = [$(MethodKind::$kind,)*];
+
+            /// The method: what it is and how it fits, from its own file.
+            pub fn method(self) -> &'static dyn Method {
+                match self {
+                    $(MethodKind::$kind => $method,)*
+                }
+            }
+        }
+    };
 }
 
-impl MethodKind {
-    pub const ALL: [MethodKind; 9] = [
-        MethodKind::Nominal,
-        MethodKind::PaperRotz,
-        MethodKind::PaperRotxyz,
-        MethodKind::PaperRotxyzTransxyz,
-        MethodKind::Kinematic,
-        MethodKind::Elastic,
-        MethodKind::ResidualRidge,
-        MethodKind::Hybrid,
-        MethodKind::HybridKinematic,
-    ];
+methods! {
+    Nominal => &Paper(None),
+    PaperRotz => &Paper(Some(ErrorModelKind::RotZ)),
+    PaperRotxyz => &Paper(Some(ErrorModelKind::RotXyz)),
+    PaperRotxyzTransxyz => &Paper(Some(ErrorModelKind::RotXyzTransXyz)),
+    Kinematic => &Kinematic { elastic: false },
+    Elastic => &Kinematic { elastic: true },
+    ResidualRidge => &ResidualRidge,
+    Hybrid => &Hybrid { base: &Kinematic { elastic: true } },
+    HybridKinematic => &Hybrid { base: &Kinematic { elastic: false } },
+}
 
+/// The method every report compares the others with: the uncalibrated robot on the registered tracker frame
+/// (the paper's "Measured").
+pub const REFERENCE: MethodKind = MethodKind::Nominal;
+
+/// Classical calibration, constant geometric parameters: the method the field's others are measured against
+/// (the real-data tables give each best result as a margin below it).
+pub const CLASSICAL: MethodKind = MethodKind::Kinematic;
+
+impl MethodKind {
     /// What the method is, as its own file states it.
     pub fn info(self) -> &'static MethodInfo {
-        match self {
-            MethodKind::Nominal => &paper::NOMINAL,
-            MethodKind::PaperRotz => &paper::PAPER_ROTZ,
-            MethodKind::PaperRotxyz => &paper::PAPER_ROTXYZ,
-            MethodKind::PaperRotxyzTransxyz => &paper::PAPER_ROTXYZ_TRANSXYZ,
-            MethodKind::Kinematic => &kinematic::KINEMATIC,
-            MethodKind::Elastic => &kinematic::ELASTIC,
-            MethodKind::ResidualRidge => &residual::RESIDUAL_RIDGE,
-            MethodKind::Hybrid => &residual::HYBRID,
-            MethodKind::HybridKinematic => &residual::HYBRID_KINEMATIC,
-        }
+        self.method().info()
     }
 
     pub fn name(self) -> &'static str {
         self.info().name
+    }
+
+    /// The method of `info` (a hybrid's base, say); `None` for a method not in the list.
+    pub fn of(info: &MethodInfo) -> Option<MethodKind> {
+        MethodKind::ALL.into_iter().find(|m| m.info() == info)
+    }
+
+    /// Fits the method on `train`, with `val` for its hyper-parameters.
+    pub fn fit(self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
+        self.method().fit(ctx, train, val)
     }
 
     pub fn parse(name: &str) -> Result<MethodKind> {
@@ -78,41 +99,25 @@ impl MethodKind {
     }
 }
 
-/// Fits `kind` on `train`, with `val` for its hyper-parameters.
-pub fn fit(
-    kind: MethodKind,
-    ctx: &FitContext,
-    train: &Dataset,
-    val: &Dataset,
-) -> Result<Box<dyn Fitted>> {
-    use ErrorModelKind as E;
-    Ok(match kind {
-        MethodKind::Nominal => Box::new(PaperModel::fit(None, ctx, train, val)?),
-        MethodKind::PaperRotz => Box::new(PaperModel::fit(Some(E::RotZ), ctx, train, val)?),
-        MethodKind::PaperRotxyz => Box::new(PaperModel::fit(Some(E::RotXyz), ctx, train, val)?),
-        MethodKind::PaperRotxyzTransxyz => {
-            Box::new(PaperModel::fit(Some(E::RotXyzTransXyz), ctx, train, val)?)
-        }
-        MethodKind::Kinematic => Box::new(KinematicModel::fit(false, ctx, train, val)?),
-        MethodKind::Elastic => Box::new(KinematicModel::fit(true, ctx, train, val)?),
-        MethodKind::ResidualRidge => Box::new(ResidualModel::fit(ctx, train, val)?),
-        MethodKind::Hybrid | MethodKind::HybridKinematic => {
-            let base = kind.info().base.expect("a hybrid names its base");
-            Box::new(fit_hybrid(MethodKind::parse(base.name)?, ctx, train, val)?)
-        }
-    })
+impl fmt::Display for MethodKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
-/// A hybrid on `base`: fits the base, then gives it to [`HybridModel::fit`]. The hybrid's own check of the
-/// sets runs first, so a hybrid on too few points fails under its own name.
-pub fn fit_hybrid(
-    base: MethodKind,
-    ctx: &FitContext,
-    train: &Dataset,
-    val: &Dataset,
-) -> Result<HybridFitted> {
-    HybridModel::check_sets(base.info(), train, val)?;
-    HybridModel::fit(fit(base, ctx, train, val)?, ctx, train, val)
+/// A method is written to files by its name.
+impl Serialize for MethodKind {
+    fn serialize<S: Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name())
+    }
+}
+
+/// … and read from its name, with the list of names when it is none of them.
+impl<'de> Deserialize<'de> for MethodKind {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        MethodKind::parse(&name).map_err(|e| serde::de::Error::custom(e.detail()))
+    }
 }
 
 /// `model.json`: any fitted method, tagged by its model type, so `calibrate apply` can load what `calibrate`
@@ -314,7 +319,7 @@ mod tests {
             domain: Default::default(),
         };
         let paper = PaperModel {
-            method: &paper::NOMINAL,
+            method: &crate::calib::paper::NOMINAL,
             kind: None,
             basis: basis.clone(),
             candidates: Vec::new(),
@@ -352,6 +357,31 @@ mod tests {
         assert_eq!(back.into_fitted().unwrap().method(), "nominal");
     }
 
+    /// The list is consistent: names unique, each kind's method says it is that kind, a hybrid's description
+    /// names the base it fits, and every name reads back as its kind.
+    #[test]
+    fn the_list_is_consistent() {
+        for (i, kind) in MethodKind::ALL.into_iter().enumerate() {
+            assert_eq!(MethodKind::parse(kind.name()).unwrap(), kind);
+            assert_eq!(MethodKind::of(kind.info()), Some(kind));
+            assert!(
+                MethodKind::ALL[..i].iter().all(|m| m.name() != kind.name()),
+                "{kind} twice"
+            );
+            let json = serde_json::to_string(&kind).unwrap();
+            assert_eq!(json, format!("\"{kind}\""));
+            assert_eq!(serde_json::from_str::<MethodKind>(&json).unwrap(), kind);
+        }
+        for (hybrid, base) in [
+            (MethodKind::Hybrid, MethodKind::Elastic),
+            (MethodKind::HybridKinematic, MethodKind::Kinematic),
+        ] {
+            assert_eq!(hybrid.info().base, Some(base.info()));
+        }
+        let e = serde_json::from_str::<MethodKind>("\"oracle\"").unwrap_err();
+        assert!(e.to_string().contains("unknown method 'oracle'"), "{e}");
+    }
+
     /// Every method of the list saves, and its `model.json` loads into a model that predicts the same, bit for
     /// bit: a model type missing from `SavedModel` fails here, not in a user's `calibrate`.
     #[test]
@@ -383,7 +413,9 @@ mod tests {
         };
         let (train, val, test) = (set(150), set(75), set(10));
         for kind in MethodKind::ALL {
-            let model = fit(kind, &ctx, &train, &val).unwrap_or_else(|e| panic!("{kind:?}: {e}"));
+            let model = kind
+                .fit(&ctx, &train, &val)
+                .unwrap_or_else(|e| panic!("{kind:?}: {e}"));
             let text = serde_json::to_string(&model.save().unwrap()).unwrap();
             let back = serde_json::from_str::<SavedModel>(&text)
                 .unwrap()

@@ -29,7 +29,7 @@ pub use super::correction::{ComponentModel, ResidualCorrection};
 use super::correction::{Reference, mean};
 use super::domain::Domain;
 use super::kinematic::{ELASTIC, KINEMATIC};
-use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
+use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
 use super::rigid::centre;
 use super::tracker_frame::{
     Observation, Registration, fit_mounting, fit_tracker_frame, probe_rotation,
@@ -68,6 +68,48 @@ const fn hybrid(name: &'static str, base: &'static MethodInfo) -> MethodInfo {
         takes_inputs: true,
         base: Some(base),
         design: base.design,
+    }
+}
+
+/// `residual-ridge`.
+pub struct ResidualRidge;
+
+impl Method for ResidualRidge {
+    fn info(&self) -> &'static MethodInfo {
+        &RESIDUAL_RIDGE
+    }
+
+    fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
+        Ok(Box::new(ResidualModel::fit(ctx, train, val)?))
+    }
+}
+
+/// A hybrid on `base`: fits the base, then the residual of its predictions. The hybrid's own check of the
+/// sets runs first, so a hybrid on too few points fails under its own name.
+pub struct Hybrid {
+    pub base: &'static dyn Method,
+}
+
+impl Method for Hybrid {
+    fn info(&self) -> &'static MethodInfo {
+        HybridModel::on_base(self.base.info()).0
+    }
+
+    fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
+        Ok(Box::new(self.fit_hybrid(ctx, train, val)?))
+    }
+}
+
+impl Hybrid {
+    /// [`Method::fit`] with the hybrid's own type, whose base a caller can ask for.
+    pub fn fit_hybrid(
+        &self,
+        ctx: &FitContext,
+        train: &Dataset,
+        val: &Dataset,
+    ) -> Result<HybridFitted> {
+        HybridModel::check_sets(self.base.info(), train, val)?;
+        HybridModel::fit(self.base.fit(ctx, train, val)?, ctx, train, val)
     }
 }
 

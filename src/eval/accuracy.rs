@@ -1,52 +1,28 @@
-//! How accurate each fitted method really is. Four views, all of the measured point (the reflector, or the
-//! nest centre) and, where the data has it, of the nest orientation:
-//!
-//! - **test**: the held-out test split, measured vs predicted — what a user can see (tracker noise included);
-//! - **truth**: a dense noise-free grid of every region, true vs predicted — what the user will get;
-//! - **shell**: the same on a shell just outside the regions — extrapolation;
-//! - **closed loop**: for target poses, the joint command from the method's inverse, run on the true arm,
-//!   and the distance to the target — what a controller sent that command would do.
-//!
-//! A method predicts in its own registered frame `R = tracker_to_base · tracker`. The truth lives in the world
-//! frame `W`, and the tracker's true pose is `T_trk` (world ← tracker); a true world point goes into `R` as
-//! `tracker_to_base · T_trk⁻¹ · p_W`, which is what a perfect tracker would have measured seen through the
-//! method's own registration. Closed-loop targets go into `R` the same way and the distance is taken in `W`.
+//! The simulated campaign's `[evaluation]`: every listed method fitted on a split of the campaign, the oracle
+//! beside them, each judged in every view ([`super::judge`]) and written to `evaluation.json`.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
-use rand::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::oracle::{Oracle, nest_rotation};
+use super::ground_truth::{GroundTruth, GroundTruthConfig, TruthSet};
+use super::judge::{Judgement, PointErrors, judge};
+use super::oracle::{ORACLE, Oracle};
 use super::split::Parts;
 use super::stats::Stats;
-use crate::calib::method::{FitContext, Fitted};
-use crate::calib::registry::{self, MethodKind};
-use crate::calib::regression::RegressionOptions;
-use crate::campaign::ground_truth::{GROUND_TRUTH_ATTEMPT, TruePoint};
-use crate::campaign::{
-    CampaignConfig, DistributionKind, Generator, RegionConfig, Rejections, Simulation,
-};
+use crate::calib::method::{FitContext, Fitted, MethodInfo};
+use crate::calib::registry::MethodKind;
+use crate::campaign::ground_truth::TruePoint;
+use crate::campaign::{CampaignConfig, RegionConfig, Rejections, Simulation};
 use crate::dataset::{Dataset, random_split};
 use crate::error::{Error, Result};
 use crate::measurements::as_dataset;
-use crate::rng::Stream;
-use crate::truth::{TrueRobot, TrueState};
-use crate::world::World;
+use crate::truth::TrueRobot;
 
-/// The name the oracle goes by in a scenario's method list and in reports.
-pub const ORACLE: &str = "oracle";
-/// No ground-truth set may ask for more points than this per region.
-const MAX_SET_POINTS: usize = 1_000_000;
-
-fn default_methods() -> Vec<String> {
-    MethodKind::ALL
-        .iter()
-        .map(|m| m.name().to_string())
-        .collect()
+fn default_methods() -> Vec<MethodKind> {
+    MethodKind::ALL.to_vec()
 }
 fn default_split() -> [f64; 3] {
     [0.5, 0.25, 0.25]
@@ -68,9 +44,9 @@ fn default_closed_loop_points() -> usize {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct EvaluationConfig {
-    /// Methods to fit, by name (`nominal`, `paper-rotz`, …); the oracle is always added.
+    /// Methods to fit (`nominal`, `paper-rotz`, …); the oracle is always added.
     #[serde(default = "default_methods")]
-    pub methods: Vec<String>,
+    pub methods: Vec<MethodKind>,
     /// Train, validation and test fractions of the campaign's points.
     #[serde(default = "default_split")]
     pub split: [f64; 3],
@@ -107,12 +83,9 @@ impl Default for EvaluationConfig {
 
 impl EvaluationConfig {
     pub fn validate(&self) -> std::result::Result<(), String> {
-        for (i, name) in self.methods.iter().enumerate() {
-            if name != ORACLE {
-                MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
-            }
-            if self.methods[..i].contains(name) {
-                return Err(format!("methods: '{name}' is listed twice"));
+        for (i, method) in self.methods.iter().enumerate() {
+            if self.methods[..i].contains(method) {
+                return Err(format!("methods: '{method}' is listed twice"));
             }
         }
         if self.split.iter().any(|f| !(f.is_finite() && *f > 0.0))
@@ -123,300 +96,18 @@ impl EvaluationConfig {
                 self.split
             ));
         }
-        if self.grid_points == 0 {
-            return Err("grid_points must be at least 1".into());
-        }
-        for (name, n) in [
-            ("grid_points", self.grid_points),
-            ("shell_points", self.shell_points),
-            ("closed_loop_points", self.closed_loop_points),
-        ] {
-            if n > MAX_SET_POINTS {
-                return Err(format!("{name} = {n} exceeds {MAX_SET_POINTS}"));
-            }
-        }
-        if !(self.shell_width_m.is_finite() && self.shell_width_m > 0.0) {
-            return Err(format!(
-                "shell_width_m = {} must be finite and positive",
-                self.shell_width_m
-            ));
-        }
-        Ok(())
+        self.ground_truth().validate()
     }
 
-    /// The listed methods a user can fit (everything but the oracle), in order.
-    pub fn kinds(&self) -> Result<Vec<MethodKind>> {
-        self.methods
-            .iter()
-            .filter(|m| *m != ORACLE)
-            .map(|m| MethodKind::parse(m))
-            .collect()
-    }
-}
-
-/// Noise-free true points of one kind, over all regions.
-#[derive(Clone, Debug, Default)]
-pub struct TruthSet {
-    pub points: Vec<TruePoint>,
-    /// Per region: candidates, feasible, and why the others were dropped.
-    pub rejections: BTreeMap<String, Rejections>,
-}
-
-/// What the evaluation knows that no method does.
-#[derive(Clone, Debug)]
-pub struct GroundTruth {
-    /// The tracker's true pose, world ← tracker.
-    pub tracker_pose: Isometry3<f64>,
-    /// The true measured point (reflector, or nest centre) in the flange frame.
-    pub measured_point: Point3<f64>,
-    /// The nest's true rotation from its drawing; `None` for a single reflector.
-    pub nest_rotation: Option<UnitQuaternion<f64>>,
-    /// A lattice over each region.
-    pub grid: TruthSet,
-    /// Points within `shell_width_m` outside each region's box.
-    pub shell: TruthSet,
-    /// Closed-loop targets: uniform in each region.
-    pub closed_loop: TruthSet,
-}
-
-/// What every method fitted in `world` may know: its nominal robot and the payload the user declares.
-pub fn fit_context(world: &World) -> FitContext<'_> {
-    FitContext {
-        chain: &world.nominal,
-        dh: &world.dh,
-        payload: world.payload(),
-        regression: RegressionOptions::default(),
-    }
-}
-
-/// Set numbers: each draws its own layouts and orientations.
-const GRID: u64 = 0;
-const SHELL: u64 = 1;
-const CLOSED_LOOP: u64 = 2;
-
-impl GroundTruth {
-    /// The ground truth of `regions` in `world`, with the campaign's posture and obstacles (`campaign`).
-    pub fn build(
-        world: &World,
-        campaign: &CampaignConfig,
-        regions: &[RegionConfig],
-        config: &EvaluationConfig,
-    ) -> Result<GroundTruth> {
-        let generator = Generator {
-            world,
-            config: campaign,
-            seed: world.seed(),
-            selector: None,
-        };
-        let layout_rng =
-            |r: u64, set: u64| world.rng(Stream::Layout, &[r, GROUND_TRUTH_ATTEMPT + set]);
-        let mut grid = TruthSet::default();
-        let mut shell = TruthSet::default();
-        let mut closed_loop = TruthSet::default();
-        for (r, region) in regions.iter().enumerate() {
-            let r = r as u64;
-            let unit = DistributionKind::Grid.build().sample(
-                config.grid_points,
-                region.size_m,
-                &mut layout_rng(r, GRID),
-            );
-            grid.add(region, generator.ground_truth(r, GRID, region, &unit)?);
-
-            if config.shell_points > 0 {
-                let (grown, unit) = shell_layout(
-                    region,
-                    config.shell_width_m,
-                    config.shell_points,
-                    &mut layout_rng(r, SHELL),
-                );
-                shell.add(region, generator.ground_truth(r, SHELL, &grown, &unit)?);
-            }
-
-            if config.closed_loop_points > 0 {
-                let unit = DistributionKind::Uniform.build().sample(
-                    config.closed_loop_points,
-                    region.size_m,
-                    &mut layout_rng(r, CLOSED_LOOP),
-                );
-                closed_loop.add(
-                    region,
-                    generator.ground_truth(r, CLOSED_LOOP, region, &unit)?,
-                );
-            }
-        }
-        Ok(GroundTruth {
-            tracker_pose: world.tracker.pose,
-            measured_point: super::centre(&world.mounting.actual),
-            nest_rotation: nest_rotation(&world.mounting)?,
-            grid,
-            shell,
-            closed_loop,
-        })
-    }
-
-    /// The true measured point of a flange pose (world).
-    pub fn position(&self, flange: &Isometry3<f64>) -> Point3<f64> {
-        flange * self.measured_point
-    }
-
-    /// The true nest orientation of a flange pose (world), for nests.
-    pub fn orientation(&self, flange: &Isometry3<f64>) -> Option<UnitQuaternion<f64>> {
-        self.nest_rotation.map(|r| flange.rotation * r)
-    }
-
-    /// World → the registered frame of `model`: `tracker_to_base · T_trk⁻¹`.
-    pub fn to_method(&self, model: &dyn Fitted) -> Isometry3<f64> {
-        model.registration().frame.tracker_to_base * self.tracker_pose.inverse()
-    }
-}
-
-impl TruthSet {
-    fn add(&mut self, region: &RegionConfig, (points, counts): (Vec<TruePoint>, Rejections)) {
-        self.points.extend(points);
-        self.rejections.insert(region.name.clone(), counts);
-    }
-}
-
-/// The region's box grown by `width` on every side, and `n` uniform points of it (unit coordinates of the grown
-/// box) that lie outside the original box.
-fn shell_layout(
-    region: &RegionConfig,
-    width: f64,
-    n: usize,
-    rng: &mut rand_chacha::ChaCha8Rng,
-) -> (RegionConfig, Vec<[f64; 3]>) {
-    let grown = RegionConfig {
-        size_m: region.size_m.map(|s| s + 2.0 * width),
-        ..region.clone()
-    };
-    let centre = Vector3::from(region.center_m);
-    let half = Vector3::from(region.size_m) / 2.0;
-    let outside = |u: &[f64; 3]| {
-        let d = grown.point_at(u).coords - centre;
-        (0..3).any(|k| d[k].abs() > half[k])
-    };
-    let mut unit = Vec::with_capacity(n);
-    // At least a fraction 1 − s/(s + 2w) ≥ 2w/(s + 2w) of the grown box lies outside; the bound on draws only
-    // guards against a pathological width.
-    for _ in 0..n.saturating_mul(10_000) {
-        if unit.len() == n {
-            break;
-        }
-        let u = [rng.random(), rng.random(), rng.random()];
-        if outside(&u) {
-            unit.push(u);
+    /// The ground-truth sets the methods are judged on.
+    pub fn ground_truth(&self) -> GroundTruthConfig {
+        GroundTruthConfig {
+            grid_points: self.grid_points,
+            shell_width_m: self.shell_width_m,
+            shell_points: self.shell_points,
+            closed_loop_points: self.closed_loop_points,
         }
     }
-    (grown, unit)
-}
-
-/// Per-point errors of one view: distances (m) and, where the data has it, orientation angles (rad).
-#[derive(Clone, Debug, Default)]
-pub struct PointErrors {
-    pub position: Vec<f64>,
-    pub orientation: Vec<f64>,
-    /// Points the method could not handle (closed loop: its inverse did not converge).
-    pub failed: usize,
-    pub first_failure: Option<String>,
-}
-
-/// Measured (the tracker, through the method's registration) vs predicted, on held-out data.
-pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<PointErrors> {
-    let observations = model.registration().observe(test)?;
-    let mut e = PointErrors::default();
-    for o in &observations {
-        let pred = model.predict_with(&o.q, &o.inputs);
-        e.position.push((o.position - pred.position).norm());
-        if let Some(measured) = o.orientation {
-            e.orientation.push(measured.angle_to(&pred.orientation));
-        }
-    }
-    Ok(e)
-}
-
-/// True (mapped into the method's frame) vs predicted at the commands of `points`.
-pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> PointErrors {
-    truth_errors_with(model, truth, points, &[])
-}
-
-/// [`truth_errors`] with the model's extra inputs set to `inputs` at every point (empty: their training means).
-pub fn truth_errors_with(
-    model: &dyn Fitted,
-    truth: &GroundTruth,
-    points: &[TruePoint],
-    inputs: &[f64],
-) -> PointErrors {
-    let to_method = truth.to_method(model);
-    let with_orientation = model.registration().measures_orientation();
-    let per_point: Vec<(f64, Option<f64>)> = points
-        .par_iter()
-        .map(|p| {
-            let pred = model.predict_with(&p.q_cmd, inputs);
-            let position = to_method * truth.position(&p.true_flange);
-            let angle = truth
-                .orientation(&p.true_flange)
-                .filter(|_| with_orientation)
-                .map(|r| (to_method.rotation * r).angle_to(&pred.orientation));
-            ((position - pred.position).norm(), angle)
-        })
-        .collect();
-    let mut e = PointErrors::default();
-    for (d, a) in per_point {
-        e.position.push(d);
-        e.orientation.extend(a);
-    }
-    e
-}
-
-/// Closed loop: each point's target pose (the flange pose its command reaches on the nominal model, carrying
-/// the true measured point and nest), into the method's frame, the method's inverse from the target's nominal
-/// command, that command on the true arm (noise-free, fixed-point deflection), and the distance (and angle) to
-/// the target in the world frame.
-pub fn closed_loop_errors(
-    model: &dyn Fitted,
-    truth: &GroundTruth,
-    robot: &TrueRobot,
-    points: &[TruePoint],
-) -> PointErrors {
-    let to_method = truth.to_method(model);
-    let with_orientation = model.registration().measures_orientation();
-    let per_point: Vec<std::result::Result<(f64, Option<f64>), String>> = points
-        .par_iter()
-        .map_init(
-            || TrueState::new(robot),
-            |state, p| {
-                let target = truth.position(&p.nominal_flange);
-                let target_rotation = truth
-                    .orientation(&p.nominal_flange)
-                    .filter(|_| with_orientation);
-                let in_method = target_rotation.map(|r| to_method.rotation * r);
-                let (command, _) = model
-                    .command_for(&(to_method * target), in_method.as_ref(), &p.q_cmd)
-                    .map_err(|e| e.to_string())?;
-                let reached = robot
-                    .flange_pose(&command, state)
-                    .map_err(|e| e.to_string())?;
-                let angle = target_rotation
-                    .zip(truth.orientation(&reached))
-                    .map(|(t, r)| r.angle_to(&t));
-                Ok(((truth.position(&reached) - target).norm(), angle))
-            },
-        )
-        .collect();
-    let mut e = PointErrors::default();
-    for outcome in per_point {
-        match outcome {
-            Ok((d, a)) => {
-                e.position.push(d);
-                e.orientation.extend(a);
-            }
-            Err(message) => {
-                e.failed += 1;
-                e.first_failure.get_or_insert(message);
-            }
-        }
-    }
-    e
 }
 
 /// Statistics of one view: position in millimetres, orientation in radians.
@@ -445,7 +136,7 @@ impl PointErrors {
 /// One method's evaluation, or why it has none.
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodReport {
-    pub method: String,
+    pub method: &'static MethodInfo,
     /// `ok` or `failed`.
     pub status: String,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -461,9 +152,29 @@ pub struct MethodReport {
 }
 
 impl MethodReport {
-    fn failed(method: &str, error: &Error) -> MethodReport {
+    /// The statistics of every view `judged` has points in.
+    fn judged(
+        method: &'static MethodInfo,
+        judged: &Judgement,
+        truth: &GroundTruth,
+    ) -> MethodReport {
+        let view = |points: &[TruePoint], errors: &PointErrors| {
+            (!points.is_empty()).then(|| errors.summary())
+        };
         MethodReport {
-            method: method.to_string(),
+            method,
+            status: "ok".into(),
+            error: None,
+            test: Some(judged.test.summary()),
+            truth: view(&truth.grid.points, &judged.grid),
+            shell: view(&truth.shell.points, &judged.shell),
+            closed_loop: view(&truth.closed_loop.points, &judged.closed_loop),
+        }
+    }
+
+    fn failed(method: &'static MethodInfo, error: &Error) -> MethodReport {
+        MethodReport {
+            method,
             status: "failed".into(),
             error: Some(error.to_string()),
             test: None,
@@ -527,35 +238,15 @@ pub fn split_campaign(
     Ok((parts.train, parts.val, parts.test))
 }
 
-/// Every view of one fitted method.
+/// Every view of one fitted method, for `evaluation.json`.
 pub fn evaluate_method(
     model: &dyn Fitted,
     test: &Dataset,
     truth: &GroundTruth,
     robot: &TrueRobot,
 ) -> Result<MethodReport> {
-    let views = |points: &[TruePoint], closed: bool| -> Option<Summary> {
-        if points.is_empty() {
-            return None;
-        }
-        Some(
-            if closed {
-                closed_loop_errors(model, truth, robot, points)
-            } else {
-                truth_errors(model, truth, points)
-            }
-            .summary(),
-        )
-    };
-    Ok(MethodReport {
-        method: model.method().to_string(),
-        status: "ok".into(),
-        error: None,
-        test: Some(test_errors(model, test)?.summary()),
-        truth: views(&truth.grid.points, false),
-        shell: views(&truth.shell.points, false),
-        closed_loop: views(&truth.closed_loop.points, true),
-    })
+    let judged = judge(model, test, truth, robot)?;
+    Ok(MethodReport::judged(model.info(), &judged, truth))
 }
 
 /// Fits every method of `config` on the simulated campaign, adds the oracle, and evaluates them all. A method
@@ -570,21 +261,21 @@ pub fn evaluate(
     let world = &sim.world;
     let seed = config.split_seed.unwrap_or(world.seed());
     let (train, val, test) = split_campaign(sim, config.split, seed)?;
-    let truth = GroundTruth::build(world, campaign, regions, config)?;
-    let ctx = fit_context(world);
-    let kinds = config.kinds()?;
-    let mut methods: Vec<MethodReport> = kinds
+    let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth())?;
+    let ctx = FitContext::of(world);
+    let mut methods: Vec<MethodReport> = config
+        .methods
         .par_iter()
         .map(|&kind| {
-            registry::fit(kind, &ctx, &train, &val)
+            kind.fit(&ctx, &train, &val)
                 .and_then(|model| evaluate_method(model.as_ref(), &test, &truth, &world.robot))
-                .unwrap_or_else(|e| MethodReport::failed(kind.name(), &e))
+                .unwrap_or_else(|e| MethodReport::failed(kind.info(), &e))
         })
         .collect();
     let oracle = Oracle::new(world)?.registered_on(&[&train, &val])?;
     methods.push(
         evaluate_method(&oracle, &test, &truth, &world.robot)
-            .unwrap_or_else(|e| MethodReport::failed(ORACLE, &e)),
+            .unwrap_or_else(|e| MethodReport::failed(&ORACLE, &e)),
     );
     Ok(Evaluation {
         scenario: world.config.name.clone(),

@@ -1,8 +1,10 @@
 //! Evaluation: error statistics as the paper reports them, and what the errors of a campaign are made of.
 //! The only stage allowed to read the truth.
 //!
-//! - [`accuracy`]: how accurate a fitted method is on the test split, the ground-truth grid, the shell and in
-//!   closed loop (the simulated campaign's `[evaluation]`);
+//! - [`ground_truth`]: the noise-free true points of every region (grid, shell, closed-loop targets);
+//! - [`judge`]: a fitted method's errors on the test split, the ground-truth grid, the shell and in closed loop —
+//!   the one place a fit is judged, for the evaluation, the study and `calibrate --truth`;
+//! - [`accuracy`]: the simulated campaign's `[evaluation]` (`evaluation.json`);
 //! - [`oracle`]: the true robot as a method (the floor); [`budget`]: what the errors of a campaign are made of;
 //! - [`split`], [`tables`], [`transfer`], [`protocol`]: measured data split, the paper's Tables 1 and 2, a test
 //!   campaign re-registered on its own points, and fitting on one real series and testing on another;
@@ -10,6 +12,8 @@
 
 pub mod accuracy;
 pub mod budget;
+pub mod ground_truth;
+pub mod judge;
 pub mod oracle;
 pub mod protocol;
 pub mod split;
@@ -18,7 +22,9 @@ pub mod tables;
 pub mod transfer;
 
 pub use crate::calib::rigid::centre;
-pub use accuracy::{Evaluation, EvaluationConfig, GroundTruth, evaluate};
+pub use accuracy::{Evaluation, EvaluationConfig, evaluate};
 pub use budget::{Budget, measured, registered_distances};
+pub use ground_truth::{GroundTruth, GroundTruthConfig};
+pub use judge::{Judgement, judge};
 pub use oracle::Oracle;
 pub use stats::Stats;

@@ -16,7 +16,7 @@ use super::split::{Parts, SplitRule};
 use super::stats::Stats;
 use super::transfer::{self, TestRegistration, Transfer};
 use crate::calib::method::FitContext;
-use crate::calib::registry::{self, MethodKind};
+use crate::calib::registry::MethodKind;
 use crate::dataset::{Dataset, Split, random_train_val};
 use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
@@ -48,7 +48,7 @@ pub struct Scores {
 /// One method fitted once and scored on every test set.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    pub method: String,
+    pub method: MethodKind,
     /// Extra regression inputs offered (empty: the joint angles only).
     pub inputs: Vec<String>,
     pub fit_ms: f64,
@@ -62,10 +62,10 @@ pub struct Table {
     pub rows: Vec<Row>,
 }
 
-/// One fit of the learning curve.
+/// One fit of the learning curve: one method on one random training subset of one size.
 #[derive(Clone, Debug, Serialize)]
-pub struct CurvePoint {
-    pub method: String,
+pub struct CurveDraw {
+    pub method: MethodKind,
     pub size: usize,
     pub draw: usize,
     /// Test mean position error (mm), or why the fit failed.
@@ -103,7 +103,7 @@ pub fn row(
     tests: &[TestSet],
 ) -> Result<Row> {
     let started = Instant::now();
-    let model = registry::fit(kind, ctx, train, val)?;
+    let model = kind.fit(ctx, train, val)?;
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
     let scores = tests
         .iter()
@@ -115,7 +115,7 @@ pub fn row(
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(Row {
-        method: model.method().to_string(),
+        method: kind,
         inputs: model.input_names().to_vec(),
         fit_ms,
         scores,
@@ -206,7 +206,7 @@ pub fn curve(
     parts: &Parts,
     sizes: &[usize],
     draws: usize,
-) -> Result<Vec<CurvePoint>> {
+) -> Result<Vec<CurveDraw>> {
     let labels = &parts.labels;
     let pool: Vec<usize> = (0..data.len())
         .filter(|&i| labels[i] != Split::Test)
@@ -236,7 +236,7 @@ pub fn curve(
             let subset = data0.subset(&order[..n]);
             let result = random_train_val(n, fraction, d as u64).and_then(|labels| {
                 let Parts { train, val, .. } = Parts::of(&subset, labels);
-                let model = registry::fit(kind, ctx, &train, &val)?;
+                let model = kind.fit(ctx, &train, &val)?;
                 let e = transfer::evaluate(model.as_ref(), &test, TestRegistration::Model)?;
                 Ok(Stats::of(&e.errors.position).map(|s| s.mean * 1e3))
             });
@@ -244,8 +244,8 @@ pub fn curve(
                 Ok(m) => (m, None),
                 Err(e) => (None, Some(e.to_string())),
             };
-            CurvePoint {
-                method: kind.name().to_string(),
+            CurveDraw {
+                method: kind,
                 size: n,
                 draw: d,
                 mean_mm,

@@ -22,7 +22,7 @@
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use super::accuracy::PointErrors;
+use super::judge::PointErrors;
 use crate::calib::method::Fitted;
 use crate::calib::rigid::centre;
 use crate::calib::tracker_frame::{

@@ -1,6 +1,7 @@
 //! Aggregation over seeds: median and interquartile range of `metrics.csv`'s written values per (region,
 //! layout, method, size), the learning curves, and the points-needed rule read off them.
 
+use crate::calib::registry::MethodKind;
 use crate::campaign::DistributionKind;
 use crate::study::{RunMetrics, StudyResult};
 
@@ -51,7 +52,7 @@ pub fn spread(values: &[f64]) -> Option<Spread> {
 pub struct Axes {
     pub regions: Vec<String>,
     pub distributions: Vec<DistributionKind>,
-    pub methods: Vec<String>,
+    pub methods: Vec<MethodKind>,
     pub sizes: Vec<usize>,
 }
 
@@ -80,7 +81,7 @@ pub fn axes(study: &StudyResult) -> Axes {
     a.distributions
         .retain(|d| runs.iter().any(|x| x.key.distribution == *d));
     a.methods
-        .retain(|m| runs.iter().any(|x| &x.key.method == m));
+        .retain(|m| runs.iter().any(|x| x.key.method == *m));
     a.sizes.retain(|n| runs.iter().any(|x| x.key.n_train == *n));
     for run in runs {
         push(&mut a.regions, &run.key.region);
@@ -110,7 +111,7 @@ pub fn cell_spread(
     study: &StudyResult,
     region: &str,
     distribution: DistributionKind,
-    method: &str,
+    method: MethodKind,
     n_train: usize,
     column: &str,
 ) -> Option<Spread> {
@@ -161,7 +162,7 @@ pub struct CurvePoint {
 pub struct Curve {
     pub region: String,
     pub distribution: DistributionKind,
-    pub method: String,
+    pub method: MethodKind,
     /// Sizes ascending.
     pub points: Vec<CurvePoint>,
 }
@@ -172,13 +173,13 @@ pub fn learning_curves(study: &StudyResult) -> Vec<Curve> {
     let mut curves = Vec::new();
     for region in &a.regions {
         for &distribution in &a.distributions {
-            for method in &a.methods {
+            for &method in &a.methods {
                 let points: Vec<CurvePoint> = a
                     .sizes
                     .iter()
                     .filter_map(|&n| {
                         let runs: Vec<&RunMetrics> = runs_of(study, region, distribution, n)
-                            .filter(|r| &r.key.method == method)
+                            .filter(|r| r.key.method == method)
                             .collect();
                         (!runs.is_empty()).then(|| CurvePoint {
                             n_train: n,
@@ -207,7 +208,7 @@ pub fn learning_curves(study: &StudyResult) -> Vec<Curve> {
                     curves.push(Curve {
                         region: region.clone(),
                         distribution,
-                        method: method.clone(),
+                        method,
                         points,
                     });
                 }

@@ -10,6 +10,7 @@
 
 use std::fmt::Write as _;
 
+use crate::calib::registry::MethodKind;
 use crate::campaign::DistributionKind;
 use crate::error::{Error, Result};
 use crate::study::StudyResult;
@@ -28,7 +29,7 @@ pub const STATISTICS: [(&str, &str); 2] = [
 /// One (method, layout) against one target.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cell {
-    pub method: String,
+    pub method: MethodKind,
     pub distribution: DistributionKind,
     /// The fewest training points reaching the target; `None`: not within the sizes studied.
     pub n_train: Option<usize>,
@@ -64,7 +65,7 @@ impl Answer {
     }
 
     /// The best layout of `method` for this target: the fewest points, then the lower expected median.
-    pub fn best_of(&self, method: &str) -> Option<&Cell> {
+    pub fn best_of(&self, method: MethodKind) -> Option<&Cell> {
         best(self.cells.iter().filter(|c| c.method == method))
     }
 }
@@ -96,7 +97,7 @@ pub fn answers(study: &StudyResult) -> Vec<Answer> {
         for (statistic, statistic_name) in STATISTICS {
             for &target_mm in &study.config.targets_mm {
                 let mut cells = Vec::new();
-                for method in &a.methods {
+                for &method in &a.methods {
                     for &d in &a.distributions {
                         if let Some(c) = cell_of(study, &a, region, d, method, statistic, target_mm)
                         {
@@ -125,7 +126,7 @@ fn cell_of(
     a: &Axes,
     region: &str,
     d: DistributionKind,
-    method: &str,
+    method: MethodKind,
     statistic: &str,
     target_mm: f64,
 ) -> Option<Cell> {
@@ -160,7 +161,7 @@ fn cell_of(
         None => (None, last_counts),
     };
     Some(Cell {
-        method: method.to_string(),
+        method,
         distribution: d,
         n_train,
         reaching,
@@ -201,7 +202,7 @@ fn limit_note(study: &StudyResult, region: &str, target_mm: f64) -> Option<Strin
 }
 
 /// The answer's method cell: the best layout's points, or "not up to N" with the method's plateau.
-fn method_cell(answer: &Answer, method: &str) -> String {
+fn method_cell(answer: &Answer, method: MethodKind) -> String {
     match answer.best_of(method) {
         Some(c) => format!(
             "{} ({})",
@@ -283,7 +284,7 @@ pub fn answer_md(study: &StudyResult, out: &mut String) {
                         "—".into(),
                     ],
                 };
-                row.extend(a.methods.iter().map(|m| method_cell(x, m)));
+                row.extend(a.methods.iter().map(|&m| method_cell(x, m)));
                 let _ = writeln!(out, "| {target} | {} |", row.join(" | "));
             }
             out.push('\n');
@@ -339,7 +340,7 @@ fn per_layout_md(study: &StudyResult, a: &Axes, all: &[Answer], region: &str, ou
                     .map(|x| {
                         x.cells
                             .iter()
-                            .find(|c| &c.method == m && c.distribution == d)
+                            .find(|c| c.method == *m && c.distribution == d)
                             .and_then(|c| c.n_train)
                             .map_or("—".to_string(), |n| n.to_string())
                     })
@@ -447,7 +448,7 @@ pub fn answer_csv(study: &StudyResult) -> Result<Vec<u8>> {
                 x.region.clone(),
                 x.statistic.to_string(),
                 fmt_target(x.target_mm),
-                c.method.clone(),
+                c.method.to_string(),
                 c.distribution.name().to_string(),
                 c.n_train.map_or(String::new(), |n| n.to_string()),
                 c.reaching.to_string(),

@@ -383,7 +383,7 @@ fn histogram_views(study: &StudyResult) -> Vec<Part> {
             view(
                 "BarChart",
                 format!("{m}: test error before (red) and after (blue), points per mm bin"),
-                &format!("/histograms/{}", sanitize(m)),
+                &format!("/histograms/{}", sanitize(m.name())),
                 vec!["+ $origin/**".into()],
             )
         })

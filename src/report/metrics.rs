@@ -6,6 +6,7 @@
 //! value exactly as the file holds it, so that every number of `summary.md` (an aggregate of these *written*
 //! values, see [`super::aggregate`]) can be recomputed from the file to the last digit.
 
+use crate::calib::registry::REFERENCE;
 use crate::error::{Error, Result};
 use crate::eval::Stats;
 use crate::study::{RunMetrics, StudyResult};
@@ -170,17 +171,16 @@ pub fn status(run: &RunMetrics) -> String {
     }
 }
 
-/// Whether `run` ends worse than `nominal` on the same campaign (same region, layout, size and seed): its
-/// ground-truth mean, as written, above the nominal model's — a calibration that makes the arm worse. `None`
-/// for `nominal` itself, a failed run, or a study without `nominal`.
+/// Whether `run` ends worse than the reference (`nominal`) on the same campaign (same region, layout, size and
+/// seed): its ground-truth mean, as written, above the reference's — a calibration that makes the arm worse.
+/// `None` for the reference itself, a failed run, or a study without the reference.
 pub fn worse_than_nominal(run: &RunMetrics, study: &StudyResult) -> Option<bool> {
-    const NOMINAL: &str = "nominal";
-    if run.key.method == NOMINAL || run.failure.is_some() {
+    if run.key.method == REFERENCE || run.failure.is_some() {
         return None;
     }
     let k = &run.key;
     let nominal = study.runs.iter().find(|r| {
-        r.key.method == NOMINAL
+        r.key.method == REFERENCE
             && r.key.region == k.region
             && r.key.distribution == k.distribution
             && r.key.n_train == k.n_train
@@ -205,7 +205,7 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
             study.world.name.clone(),
             k.region.clone(),
             k.distribution.name().to_string(),
-            k.method.clone(),
+            k.method.to_string(),
             k.n_train.to_string(),
             k.seed.to_string(),
             status(run),
@@ -280,7 +280,7 @@ pub fn outside_csv(study: &StudyResult) -> Result<Vec<u8>> {
                 k.region.clone(),
                 b.use_region.clone(),
                 k.distribution.name().to_string(),
-                k.method.clone(),
+                k.method.to_string(),
                 k.n_train.to_string(),
                 k.seed.to_string(),
                 edge_text(b.from_m),

@@ -14,6 +14,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
+use crate::calib::registry::MethodKind;
 use crate::error::{Error, Result};
 use crate::report::aggregate::{Curve, axes, floor_spread, learning_curves};
 use crate::study::StudyResult;
@@ -155,8 +156,8 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
 const LEGEND_WIDTH: u32 = 275;
 
 /// A hybrid (a method correcting another listed one) is drawn dashed: its curve often lies on its base's.
-fn dashed(method: &str) -> bool {
-    crate::calib::registry::MethodKind::parse(method).is_ok_and(|k| k.info().base.is_some())
+fn dashed(method: MethodKind) -> bool {
+    method.info().base.is_some()
 }
 
 /// A line from `a` to `b`, solid or in dashes of 8 px with 6 px gaps.
@@ -280,7 +281,7 @@ fn learning_panel(
             )))?;
         }
         let median: Vec<(f64, f64)> = band.iter().map(|p| (p.0, p.2)).collect();
-        if dashed(&c.method) {
+        if dashed(c.method) {
             chart.draw_series(DashedLineSeries::new(median, 10, 6, col.stroke_width(3)))?;
         } else {
             chart.draw_series(LineSeries::new(median, col.stroke_width(3)))?;
@@ -301,7 +302,7 @@ fn learning_panel(
     // The legend, in its own column: each swatch drawn as its line is (hybrids and the floor dashed).
     let mut entries: Vec<(String, RGBColor, u32, bool)> = curves
         .iter()
-        .map(|&(i, c)| (c.method.clone(), colour(i), 3, dashed(&c.method)))
+        .map(|&(i, c)| (c.method.to_string(), colour(i), 3, dashed(c.method)))
         .collect();
     if !floor.is_empty() {
         entries.push(("floor (oracle)".into(), BLACK, 2, true));
@@ -355,7 +356,7 @@ pub fn histograms_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
         if before.is_empty() && after.is_empty() {
             continue;
         }
-        let name = format!("plots/histogram_{}.png", file_safe(method));
+        let name = format!("plots/histogram_{}.png", file_safe(method.name()));
         let title = format!(
             "{method}: test-split position error, region {}, {} layout, {} training points",
             d.region,
@@ -459,8 +460,9 @@ fn histogram_panel(
 /// Width of the tracker-time plot's legend column (px): the longest label is a hybrid's `+ motion`.
 const TRACKER_LEGEND_WIDTH: u32 = 330;
 
-/// A method's colour index, name and (tracker minutes, mean mm) points.
-type MethodLine<'a> = (usize, &'a str, Vec<(f64, f64)>);
+/// A method's colour index, label, whether it is dashed (the motion as inputs) and (tracker minutes, mean mm)
+/// points.
+type MethodLine = (usize, String, bool, Vec<(f64, f64)>);
 
 /// One PNG per region, `plots/tracker_time_<region>.png` (`[study.trajectory]`): the ground-truth mean (mm)
 /// against the tracker time (min, log scale), one panel per number of targets, a line per method through its
@@ -495,11 +497,11 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                             .filter(|p| p.0 > 0.0 && p.1.is_finite())
                             .collect();
                         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        let i = super::trajectory::method_index(study, &r.method);
-                        (i, r.method.as_str(), pts)
+                        let i = super::trajectory::method_index(study, r.method);
+                        (i, r.label(), r.motion_inputs, pts)
                     })
                     .collect();
-                let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.2.clone()).collect();
+                let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.3.clone()).collect();
                 if all.is_empty() {
                     panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
                     continue;
@@ -532,10 +534,10 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                     .light_line_style(RGBColor(235, 235, 235))
                     .draw()?;
                 let mut entries = Vec::new();
-                for (i, method, pts) in &lines {
+                for (i, label, dash, pts) in &lines {
                     let c = colour(*i);
                     // Fitted with the motion as inputs: dashed, in its method's colour.
-                    let dash = method.ends_with(crate::study::trajectory::MOTION_SUFFIX);
+                    let dash = *dash;
                     if dash {
                         chart.draw_series(DashedLineSeries::new(
                             pts.clone(),
@@ -547,7 +549,7 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
                         chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
                     }
                     chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
-                    entries.push((method.to_string(), c, 2, dash));
+                    entries.push((label.clone(), c, 2, dash));
                 }
                 draw_legend(&legend, entries)?;
             }

@@ -228,7 +228,7 @@ fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &
          * Learning curves: the x axis is the `{N_TRAIN_LOG_TIMELINE}` timeline, 1000 · log10(training points): \
          1000 = 10, 2000 = 100, 3000 = 1000 points (the `{N_TRAIN_TIMELINE}` timeline has the plain counts).\n\
          * Robot drawn with the nominal model at each point's commanded joints (timeline `point`).\n",
-        method = sanitize(&detail.method),
+        method = sanitize(detail.method.name()),
     );
     rec.log_static("legend", &TextDocument::from_markdown(legend))
         .map_err(rerun_error)?;
@@ -498,7 +498,7 @@ fn log_points(
     rec.log_static(
         format!(
             "world/arrows/after_x{after_factor}_{}",
-            sanitize(&detail.method)
+            sanitize(detail.method.name())
         ),
         &Arrows3D::from_vectors(detail.points.iter().map(|p| f3(&(p.error_after * g))))
             .with_origins(positions)
@@ -514,7 +514,7 @@ fn log_points(
     .map_err(rerun_error)?;
 
     rec.log_static(
-        format!("world/grid/{}", sanitize(&detail.method)),
+        format!("world/grid/{}", sanitize(detail.method.name())),
         &Points3D::new(detail.grid.iter().map(|g| p3(&g.true_position)))
             .with_colors(
                 detail
@@ -553,7 +553,7 @@ fn log_histograms(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
                 counts[b] += 1;
             }
             rec.log_static(
-                format!("histograms/{}/{side}", sanitize(method)),
+                format!("histograms/{}/{side}", sanitize(method.name())),
                 &BarChart::new(counts)
                     .with_abscissa(centres.clone())
                     .with_widths(vec![width as f32; HISTOGRAM_BINS])
@@ -581,7 +581,7 @@ pub fn learning_curves(
         let key = (
             sanitize(&run.key.region),
             run.key.distribution.name().to_string(),
-            sanitize(&run.key.method),
+            sanitize(run.key.method.name()),
         );
         groups
             .entry(key)
@@ -614,7 +614,12 @@ pub fn learning_curves(
 fn log_curves(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
     let curves = learning_curves(study);
     // Colours by the study's method order, the PNG's.
-    let methods: Vec<String> = study.config.methods.iter().map(|m| sanitize(m)).collect();
+    let methods: Vec<String> = study
+        .config
+        .methods
+        .iter()
+        .map(|m| sanitize(m.name()))
+        .collect();
     for ((region, distribution, method), points) in &curves {
         let path = format!("curves/{region}/{distribution}/{method}");
         let color = palette(methods.iter().position(|m| m == method).unwrap_or(0));

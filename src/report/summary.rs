@@ -7,6 +7,7 @@
 
 use std::fmt::Write as _;
 
+use crate::calib::registry::{MethodKind, REFERENCE};
 use crate::campaign::DistributionKind;
 use crate::error::{Error, Result};
 use crate::study::{RunMetrics, StudyResult};
@@ -150,7 +151,7 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
 /// The runs whose calibration leaves the arm worse than the nominal model on the same campaign (ground-truth
 /// mean; `metrics.csv`'s `worse_than_nominal`), counted by method and training-set size.
 pub fn worse_in_words(study: &StudyResult) -> String {
-    let mut by: Vec<(String, usize, usize)> = Vec::new();
+    let mut by: Vec<(MethodKind, usize, usize)> = Vec::new();
     for run in &study.runs {
         if worse_than_nominal(run, study) == Some(true) {
             match by
@@ -158,7 +159,7 @@ pub fn worse_in_words(study: &StudyResult) -> String {
                 .find(|(m, n, _)| *m == run.key.method && *n == run.key.n_train)
             {
                 Some(e) => e.2 += 1,
-                None => by.push((run.key.method.clone(), run.key.n_train, 1)),
+                None => by.push((run.key.method, run.key.n_train, 1)),
             }
         }
     }
@@ -179,7 +180,12 @@ pub fn worse_in_words(study: &StudyResult) -> String {
 
 /// The verdict for one method in one region: where its curve ends, whether more points would help, and the
 /// smallest target it reaches.
-fn verdict(method: &str, curves: &[&Curve], study: &StudyResult, answers: &[Answer]) -> String {
+fn verdict(
+    method: MethodKind,
+    curves: &[&Curve],
+    study: &StudyResult,
+    answers: &[Answer],
+) -> String {
     let region = curves.first().map_or("", |c| c.region.as_str());
     let runs: Vec<&RunMetrics> = study
         .runs
@@ -217,7 +223,7 @@ fn verdict(method: &str, curves: &[&Curve], study: &StudyResult, answers: &[Answ
     let Some((t, c, last)) = best else {
         return format!("**{method}**: no ground-truth result.{failures}");
     };
-    if method == "nominal" {
+    if method == REFERENCE {
         // No calibration: the starting point every method is measured against.
         return format!(
             "**{method}**: no calibration — ground-truth mean {} mm; what every method starts from.{failures}",
@@ -269,11 +275,8 @@ fn verdict(method: &str, curves: &[&Curve], study: &StudyResult, answers: &[Answ
 
 /// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
 /// largest size both have, and the reason its design implies.
-fn layout_sentence(method: &str, curves: &[&Curve]) -> String {
+fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
     use crate::design::layout::Design;
-    let Ok(kind) = crate::calib::registry::MethodKind::parse(method) else {
-        return String::new();
-    };
     let Some(designed) = curves.iter().find(|c| c.distribution.selects()) else {
         return String::new();
     };
@@ -335,12 +338,8 @@ fn layout_sentence(method: &str, curves: &[&Curve]) -> String {
 
 /// The method whose parameters a method's observability describes, when another listed method has the same
 /// ones (a hybrid and its base): its rows would repeat that method's.
-fn same_model_as(method: &str) -> Option<&'static str> {
-    crate::calib::registry::MethodKind::parse(method)
-        .ok()?
-        .info()
-        .base
-        .map(|b| b.name)
+fn same_model_as(method: MethodKind) -> Option<MethodKind> {
+    MethodKind::of(method.info().base?)
 }
 
 /// One cell of the observability table: medians of O1, O3 and logdet over the successful seeds.
@@ -348,7 +347,7 @@ pub fn fmt_observability(
     study: &StudyResult,
     region: &str,
     distribution: DistributionKind,
-    method: &str,
+    method: MethodKind,
     n_train: usize,
 ) -> String {
     let median = |column: &str| {
@@ -369,15 +368,16 @@ pub fn fmt_observability(
 }
 
 fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
-    let shown: Vec<&String> = a
+    let shown: Vec<MethodKind> = a
         .methods
         .iter()
-        .filter(|m| {
-            !same_model_as(m).is_some_and(|base| a.methods.iter().any(|x| x == base))
+        .copied()
+        .filter(|&m| {
+            !same_model_as(m).is_some_and(|base| a.methods.contains(&base))
                 && study
                     .runs
                     .iter()
-                    .any(|r| &r.key.method == *m && r.observability.is_some())
+                    .any(|r| r.key.method == m && r.observability.is_some())
         })
         .collect();
     if shown.is_empty() {
@@ -407,7 +407,7 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
                 let row: Vec<String> = a
                     .distributions
                     .iter()
-                    .map(|&d| fmt_observability(study, region, d, m, n))
+                    .map(|&d| fmt_observability(study, region, d, *m, n))
                     .collect();
                 let _ = writeln!(out, "| {n} | {} |", row.join(" | "));
             }
@@ -457,10 +457,10 @@ pub fn summary_md(study: &StudyResult) -> Result<String> {
         if a.regions.len() > 1 {
             let _ = writeln!(out, "Region `{region}`:\n");
         }
-        for m in &a.methods {
+        for &m in &a.methods {
             let these: Vec<&Curve> = curves
                 .iter()
-                .filter(|c| &c.region == region && &c.method == m)
+                .filter(|c| &c.region == region && c.method == m)
                 .collect();
             if these.is_empty() {
                 continue;

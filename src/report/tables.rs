@@ -4,6 +4,7 @@
 
 use std::fmt::Write as _;
 
+use crate::calib::registry::{MethodKind, REFERENCE};
 use crate::campaign::DistributionKind;
 use crate::study::{RunMetrics, StudyResult};
 
@@ -76,22 +77,22 @@ pub(super) fn accuracy_tables(study: &StudyResult, a: &Axes, largest: usize, out
             if table == "Table 2" && !study.orientation {
                 continue;
             }
-            let keys: Vec<(&String, DistributionKind)> = a
+            let keys: Vec<(MethodKind, DistributionKind)> = a
                 .methods
                 .iter()
-                .flat_map(|m| a.distributions.iter().map(move |&d| (m, d)))
+                .flat_map(|&m| a.distributions.iter().map(move |&d| (m, d)))
                 .collect();
-            let value = |m: &str, d: DistributionKind, column: &str| {
+            let value = |m: MethodKind, d: DistributionKind, column: &str| {
                 cell_spread(study, region, d, m, largest, column)
             };
             let columns: Vec<(&str, &str)> = rows
                 .iter()
                 .copied()
-                .filter(|(_, c)| keys.iter().any(|(m, d)| value(m, *d, c).is_some()))
+                .filter(|(_, c)| keys.iter().any(|&(m, d)| value(m, d, c).is_some()))
                 .collect();
-            let shown: Vec<&(&String, DistributionKind)> = keys
+            let shown: Vec<&(MethodKind, DistributionKind)> = keys
                 .iter()
-                .filter(|(m, d)| columns.iter().any(|(_, c)| value(m, *d, c).is_some()))
+                .filter(|&&(m, d)| columns.iter().any(|(_, c)| value(m, d, c).is_some()))
                 .collect();
             if shown.is_empty() {
                 continue;
@@ -108,17 +109,17 @@ pub(super) fn accuracy_tables(study: &StudyResult, a: &Axes, largest: usize, out
             let mut header = vec!["layout".to_string()];
             header.extend(columns.iter().map(|(label, _)| label.to_string()));
             table_header(out, "method", &header);
-            for (m, d) in shown {
+            for &(m, d) in shown {
                 let mut row = vec![d.name().to_string()];
-                row.extend(columns.iter().map(|(_, c)| fmt_column(c, value(m, *d, c))));
+                row.extend(columns.iter().map(|(_, c)| fmt_column(c, value(m, d, c))));
                 let _ = writeln!(out, "| `{m}` | {} |", row.join(" | "));
             }
             if table == "Table 1" {
                 let failed: Vec<String> = keys
                     .iter()
-                    .filter_map(|(m, d)| {
-                        let runs: Vec<_> = runs_of(study, region, *d, largest)
-                            .filter(|r| &r.key.method == *m)
+                    .filter_map(|&(m, d)| {
+                        let runs: Vec<_> = runs_of(study, region, d, largest)
+                            .filter(|r| r.key.method == m)
                             .collect();
                         let bad = runs.iter().filter(|r| r.failure.is_some()).count();
                         (bad > 0).then(|| format!("`{m}` {} {bad} of {}", d.name(), runs.len()))
@@ -175,10 +176,10 @@ pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
     for r in study
         .runs
         .iter()
-        .filter(|r| r.failure.is_none() && r.key.method != "nominal")
+        .filter(|r| r.failure.is_none() && r.key.method != REFERENCE)
     {
         let nominal = study.runs.iter().find(|n| {
-            n.key.method == "nominal"
+            n.key.method == REFERENCE
                 && n.failure.is_none()
                 && n.key.region == r.key.region
                 && n.key.distribution == r.key.distribution
@@ -195,7 +196,7 @@ pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
         }
     }
     let _ = writeln!(out, "### Runs where calibration made the arm worse\n");
-    if !study.runs.iter().any(|r| r.key.method == "nominal") {
+    if !study.runs.iter().any(|r| r.key.method == REFERENCE) {
         let _ = writeln!(
             out,
             "`nominal` is not in the study, so there is nothing to compare with.\n"
@@ -205,7 +206,7 @@ pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
     let compared = study
         .runs
         .iter()
-        .filter(|r| r.failure.is_none() && r.key.method != "nominal")
+        .filter(|r| r.failure.is_none() && r.key.method != REFERENCE)
         .count();
     let _ = writeln!(
         out,

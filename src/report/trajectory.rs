@@ -9,10 +9,11 @@ use std::fmt::Write;
 
 use super::aggregate::spread;
 use super::metrics::mm;
+use crate::calib::registry::MethodKind;
 use crate::campaign::DistributionKind;
 use crate::error::{Error, Result};
 use crate::study::StudyResult;
-use crate::study::trajectory::{MOTION_SUFFIX, TrajectoryRun};
+use crate::study::trajectory::{TrajectoryRun, label};
 
 const COLUMNS: [&str; 13] = [
     "region",
@@ -46,7 +47,7 @@ pub fn trajectory_csv(study: &StudyResult) -> Result<Option<Vec<u8>>> {
         };
         w.write_record([
             r.region.clone(),
-            r.method.clone(),
+            r.label(),
             r.speed.to_string(),
             r.n_targets.to_string(),
             r.seed.to_string(),
@@ -93,7 +94,9 @@ pub struct Measuring {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Comparison {
     pub region: String,
-    pub method: String,
+    pub method: MethodKind,
+    /// Fitted with the motion as inputs on the fly (stop and go: the method itself, no motion there).
+    pub motion_inputs: bool,
     pub n_targets: usize,
     pub stop: Measuring,
     /// In the order of `[study.trajectory] speeds`, with the speed.
@@ -110,24 +113,22 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
     let per_point = study.config.move_s + study.config.settle_s + study.config.measure_s;
     let mut regions: Vec<&str> = t.iter().map(|r| r.region.as_str()).collect();
     regions.dedup();
-    let mut methods: Vec<&str> = Vec::new();
+    let mut methods: Vec<(MethodKind, bool)> = Vec::new();
     for r in t {
-        if !methods.contains(&r.method.as_str()) {
-            methods.push(&r.method);
+        if !methods.contains(&(r.method, r.motion_inputs)) {
+            methods.push((r.method, r.motion_inputs));
         }
     }
     let mut out = Vec::new();
     for region in regions {
-        for m in &methods {
-            // A method fitted with the motion as inputs is measured stop and go as itself (no motion there).
-            let base = m.strip_suffix(MOTION_SUFFIX).unwrap_or(m);
+        for &(method, motion_inputs) in &methods {
             for &n in &cfg.sizes {
                 let stop: Vec<f64> = study
                     .runs
                     .iter()
                     .filter(|r| {
                         r.key.region == region
-                            && r.key.method == base
+                            && r.key.method == method
                             && r.key.n_train == n
                             && r.key.distribution == DistributionKind::Uniform
                             && r.key.seed < cfg.seeds
@@ -142,7 +143,8 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
                             .iter()
                             .filter(|r| {
                                 r.region == region
-                                    && r.method == *m
+                                    && r.method == method
+                                    && r.motion_inputs == motion_inputs
                                     && r.n_targets == n
                                     && r.speed == speed
                             })
@@ -161,7 +163,8 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
                     .collect();
                 out.push(Comparison {
                     region: region.to_string(),
-                    method: m.to_string(),
+                    method,
+                    motion_inputs,
                     n_targets: n,
                     stop: Measuring {
                         tracker_s: Some(study.config.campaign_points(n) as f64 * per_point),
@@ -175,15 +178,21 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
     out
 }
 
-/// The position of `method` (or of the method it was fitted as, without the motion suffix) in the study's
-/// methods: its colour in the plots and the recording.
-pub fn method_index(study: &StudyResult, method: &str) -> usize {
-    let base = method.strip_suffix(MOTION_SUFFIX).unwrap_or(method);
+impl Comparison {
+    /// The method as the table, the plot and the recording name it (`… + motion` with the motion as inputs).
+    pub fn label(&self) -> String {
+        label(self.method, self.motion_inputs)
+    }
+}
+
+/// The position of `method` in the study's methods: its colour in the plots and the recording, with the motion
+/// as inputs or without.
+pub fn method_index(study: &StudyResult, method: MethodKind) -> usize {
     study
         .config
         .methods
         .iter()
-        .position(|m| m == base)
+        .position(|&m| m == method)
         .unwrap_or(0)
 }
 
@@ -242,7 +251,7 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
             let _ = write!(
                 out,
                 "| `{}` | {} | {:.1} / {} |",
-                row.method,
+                row.label(),
                 row.n_targets,
                 row.stop.tracker_s.unwrap_or(f64::NAN) / 60.0,
                 cell(row.stop.mean_mm)

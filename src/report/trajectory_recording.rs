@@ -74,13 +74,13 @@ pub(super) fn log_trajectory(rec: &RecordingStream, study: &StudyResult) -> Resu
             "tracker_time/{}/{}/{}",
             sanitize(&row.region),
             row.n_targets,
-            sanitize(&row.method)
+            sanitize(&row.label())
         );
-        let color = palette(super::trajectory::method_index(study, &row.method));
+        let color = palette(super::trajectory::method_index(study, row.method));
         rec.log_static(
             path.as_str(),
             &SeriesLines::new()
-                .with_names([format!("{}, {} targets (mm)", row.method, row.n_targets)])
+                .with_names([format!("{}, {} targets (mm)", row.label(), row.n_targets)])
                 .with_colors([color])
                 .with_widths([2.0f32]),
         )

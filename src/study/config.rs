@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::calib::registry::MethodKind;
 use crate::campaign::{DistributionKind, RegionConfig};
-use crate::eval::accuracy::{EvaluationConfig, ORACLE};
+use crate::eval::GroundTruthConfig;
 
 /// No ground-truth set, size or test set may ask for more points than this per region.
 const MAX_POINTS: usize = 1_000_000;
@@ -45,8 +45,8 @@ pub struct StudyConfig {
     pub sizes: Vec<usize>,
     /// Point layouts to compare.
     pub distributions: Vec<DistributionKind>,
-    /// Methods by name (as `calibrate --method`); the oracle is always run as the floor.
-    pub methods: Vec<String>,
+    /// Methods (named as `calibrate --method` names them); the oracle is always run as the floor.
+    pub methods: Vec<MethodKind>,
     /// Repetitions: seeds 0..seeds of the campaign draws (layout, orientations, noise); the robot stays the
     /// scenario's one.
     pub seeds: u64,
@@ -65,7 +65,7 @@ pub struct StudyConfig {
     pub closed_loop_points: usize,
     /// The method shown point by point (error arrows, residual grid); the first method when absent.
     #[serde(default)]
-    pub detail_method: Option<String>,
+    pub detail_method: Option<MethodKind>,
     /// Upper edges (m, ascending) of the bands of distance from the training region by which `outside.csv`
     /// groups the ground-truth points of every region (grid and shell): inside (0), then (0, b₁], (b₁, b₂],
     /// …, and beyond the last edge.
@@ -115,25 +115,18 @@ impl StudyConfig {
         if self.methods.is_empty() {
             return Err("methods is empty: list at least one method".into());
         }
-        for (i, name) in self.methods.iter().enumerate() {
-            if name == ORACLE {
-                return Err(
-                    "methods: 'oracle' is always run (its ground-truth mean is every run's floor_mean); \
-                     do not list it"
-                        .into(),
-                );
-            }
-            MethodKind::parse(name).map_err(|e| format!("methods: {}", e.detail()))?;
-            if self.methods[..i].contains(name) {
-                return Err(format!("methods: '{name}' is listed twice"));
+        for (i, method) in self.methods.iter().enumerate() {
+            if self.methods[..i].contains(method) {
+                return Err(format!("methods: '{method}' is listed twice"));
             }
         }
         if let Some(detail) = &self.detail_method
             && !self.methods.contains(detail)
         {
+            let names: Vec<&str> = self.methods.iter().map(|m| m.name()).collect();
             return Err(format!(
                 "detail_method: '{detail}' is not among the methods ({})",
-                self.methods.join(", ")
+                names.join(", ")
             ));
         }
         if self.seeds == 0 {
@@ -303,23 +296,18 @@ impl StudyConfig {
         self.campaign_points(n) as f64 * self.seconds_per_point() / 3600.0
     }
 
-    /// The method shown point by point: `detail_method`, or the first method.
-    pub fn detail_method(&self) -> &str {
-        self.detail_method
-            .as_deref()
-            .or(self.methods.first().map(String::as_str))
-            .unwrap_or_default()
+    /// The method shown point by point: `detail_method`, or the first method (a valid study lists one).
+    pub fn detail_method(&self) -> Option<MethodKind> {
+        self.detail_method.or(self.methods.first().copied())
     }
 
-    /// The ground-truth sets as the evaluation builds them.
-    pub(super) fn ground_truth_config(&self) -> EvaluationConfig {
-        EvaluationConfig {
-            methods: Vec::new(),
+    /// The ground-truth sets every run is judged on.
+    pub fn ground_truth_config(&self) -> GroundTruthConfig {
+        GroundTruthConfig {
             grid_points: self.grid_points,
             shell_width_m: self.shell_width_m,
             shell_points: self.shell_points,
             closed_loop_points: self.closed_loop_points,
-            ..EvaluationConfig::default()
         }
     }
 }

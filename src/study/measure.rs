@@ -9,7 +9,7 @@ use crate::campaign::{
 };
 use crate::dataset::Dataset;
 use crate::error::Result;
-use crate::eval::accuracy::{GroundTruth, TruthSet};
+use crate::eval::ground_truth::{GroundTruth, TruthSet};
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
 use crate::world::World;

@@ -10,9 +10,11 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::calib::registry::MethodKind;
 use crate::campaign::{DistributionKind, RegionConfig};
 use crate::design::Indices;
 use crate::eval::Stats;
+pub use crate::eval::judge::DistanceBand;
 use crate::world::WorldConfig;
 
 pub mod config;
@@ -27,26 +29,12 @@ pub use config::StudyConfig;
 pub use limits::Limits;
 pub use shard::{Shard, StudyPart};
 
-/// Ground-truth errors of one run in one band of distance from its training region, over the ground-truth
-/// points (grid and shell) of one region where the calibration is used.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct DistanceBand {
-    pub use_region: String,
-    /// Band of distance from the training region's box (m): `from < d ≤ to`; `from = to = 0` is inside,
-    /// `to = ∞` the last band.
-    pub from_m: f64,
-    pub to_m: f64,
-    pub points: usize,
-    /// Mean ground-truth position error (m).
-    pub mean: f64,
-}
-
 /// Which run: the key of a `metrics.csv` row.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct RunKey {
     pub region: String,
     pub distribution: DistributionKind,
-    pub method: String,
+    pub method: MethodKind,
     pub n_train: usize,
     pub seed: u64,
 }
@@ -113,14 +101,14 @@ pub struct GridPoint {
 pub struct Detail {
     pub region: String,
     pub distribution: DistributionKind,
-    pub method: String,
+    pub method: MethodKind,
     pub n_train: usize,
     /// Training and validation points of the campaign.
     pub points: Vec<DetailPoint>,
     /// The region's ground-truth grid with the detail method's residuals.
     pub grid: Vec<GridPoint>,
     /// Test-split errors before (nominal) and after, per method, at the largest size (first layout and seed).
-    pub histograms: BTreeMap<String, BeforeAfter>,
+    pub histograms: BTreeMap<MethodKind, BeforeAfter>,
     /// The tracker's true pose (world ← tracker), for drawing it and its beams.
     pub tracker: Isometry3<f64>,
 }

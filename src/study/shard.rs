@@ -82,21 +82,28 @@ pub fn assemble(
     config: &StudyConfig,
     parts: Vec<StudyPart>,
 ) -> StudyResult {
-    let position = |list: Vec<String>| -> BTreeMap<String, usize> {
-        list.into_iter().enumerate().map(|(i, s)| (s, i)).collect()
-    };
-    let region_at = position(regions.iter().map(|r| r.name.clone()).collect());
-    let method_at = position(config.methods.clone());
+    let region_at: BTreeMap<&str, usize> = regions
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (r.name.as_str(), i))
+        .collect();
     let order = |run: &RunMetrics| {
         let k = &run.key;
         (
-            region_at.get(&k.region).copied().unwrap_or(usize::MAX),
+            region_at
+                .get(k.region.as_str())
+                .copied()
+                .unwrap_or(usize::MAX),
             config
                 .distributions
                 .iter()
                 .position(|d| *d == k.distribution)
                 .unwrap_or(usize::MAX),
-            method_at.get(&k.method).copied().unwrap_or(usize::MAX),
+            config
+                .methods
+                .iter()
+                .position(|&m| m == k.method)
+                .unwrap_or(usize::MAX),
             config
                 .sizes
                 .iter()
@@ -125,12 +132,7 @@ pub fn assemble(
         .unwrap_or_else(|| Detail {
             region: regions[0].name.clone(),
             distribution: config.distributions[0],
-            method: config.methods[config
-                .methods
-                .iter()
-                .position(|m| m == config.detail_method())
-                .unwrap_or(0)]
-            .clone(),
+            method: config.detail_method().unwrap_or(config.methods[0]),
             n_train: config.sizes.iter().copied().max().unwrap_or(0),
             points: Vec::new(),
             grid: Vec::new(),

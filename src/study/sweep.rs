@@ -26,19 +26,17 @@ pub use super::progress::Progress;
 use super::progress::{Counter, run_weight};
 use super::shard::{Shard, StudyPart, assemble};
 use super::{
-    BeforeAfter, Detail, DetailPoint, DistanceBand, GridPoint, RunKey, RunMetrics, StudyConfig,
-    StudyResult,
+    BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
 };
 use crate::calib::method::{FitContext, Fitted};
-use crate::calib::registry::{self, MethodKind};
+use crate::calib::registry::{MethodKind, REFERENCE};
 use crate::campaign::{Campaign, CampaignConfig, DistributionKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
 use crate::design::layout::Design;
 use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
-use crate::eval::accuracy::{
-    GroundTruth, closed_loop_errors, fit_context, test_errors, truth_errors,
-};
+use crate::eval::GroundTruth;
+use crate::eval::judge::{by_distance, judge, test_errors, truth_errors};
 use crate::eval::{Oracle, Stats};
 use crate::measurements::as_dataset;
 use crate::world::World;
@@ -87,21 +85,40 @@ struct Shared<'a> {
     detail_method: usize,
     regions: Vec<RegionSets>,
     progress: &'a Counter,
+    /// Whether `fit_ms` holds wall-clock times ([`RunOptions::timings`]).
+    timings: bool,
+}
+
+/// How a sweep runs, beside what it runs.
+#[derive(Clone, Copy, Debug)]
+pub struct RunOptions {
+    pub progress: Progress,
+    /// Record each fit's wall-clock time in `fit_ms`; otherwise NaN, so that the same scenario gives
+    /// byte-identical files whatever the machine and the thread count.
+    pub timings: bool,
+}
+
+impl RunOptions {
+    /// No progress shown and no timings: for callers that want only the numbers.
+    pub const QUIET: RunOptions = RunOptions {
+        progress: Progress::Hidden,
+        timings: false,
+    };
 }
 
 /// Runs the study `config` over `regions` of `world`, with the campaign configuration `campaign`, on the current
 /// rayon pool (install a pool to choose the thread count). `config` must have passed
-/// [`StudyConfig::validate`] for `regions`. Errors: a region whose test set or ground truth cannot be built.
-/// Runs that fail (a campaign the region cannot supply, a method that cannot be fitted) are recorded as failed
-/// with their reason.
+/// [`StudyConfig::validate`] for `regions` (reading a scenario checks it). Errors: a region whose test set or
+/// ground truth cannot be built. Runs that fail (a campaign the region cannot supply, a method that cannot be
+/// fitted) are recorded as failed with their reason.
 pub fn run_study(
     world: &World,
     campaign: &CampaignConfig,
     regions: &[RegionConfig],
     config: &StudyConfig,
-    progress: Progress,
+    options: RunOptions,
 ) -> Result<StudyResult> {
-    let part = run_part(world, campaign, regions, config, progress, Shard::WHOLE)?;
+    let part = run_part(world, campaign, regions, config, options, Shard::WHOLE)?;
     Ok(assemble(world, regions, config, vec![part]))
 }
 
@@ -112,28 +129,89 @@ pub fn run_part(
     campaign: &CampaignConfig,
     regions: &[RegionConfig],
     config: &StudyConfig,
-    progress: Progress,
+    options: RunOptions,
     shard: Shard,
 ) -> Result<StudyPart> {
-    config
-        .validate(regions)
-        .map_err(|message| Error::Invalid(format!("study.{message}")))?;
-    let kinds: Vec<MethodKind> = config
-        .methods
+    let ctx = FitContext::of(world);
+    let kinds = config.methods.clone();
+    let measure = Measure {
+        world,
+        campaign,
+        regions,
+    };
+    let (selectors, design_of) = selectors(config, &ctx, world, campaign)?;
+    let region_sets = region_sets(&measure, config)?;
+    let (held, jobs, total_campaigns) = jobs(regions.len(), config, shard);
+    let total_work = jobs
         .iter()
-        .map(|m| MethodKind::parse(m))
-        .collect::<Result<_>>()?;
-    let detail_method = config
-        .methods
+        .map(|j| kinds.len() as u64 * run_weight(config, config.sizes[j.size]))
+        .sum();
+    let counter = Counter::new(options.progress, jobs.len() * kinds.len(), total_work);
+    let designs = kinds
         .iter()
-        .position(|m| m == config.detail_method())
-        .unwrap_or(0);
+        .map(|&kind| DesignModel::for_method(kind, &ctx, &world.mounting.nominal))
+        .collect::<Result<Vec<_>>>()?;
+    let shared = Shared {
+        measure,
+        config,
+        world,
+        selectors: selectors.iter().map(|s| s.as_ref()).collect(),
+        design_of,
+        ctx,
+        designs,
+        detail_method: config
+            .detail_method()
+            .and_then(|d| kinds.iter().position(|&m| m == d))
+            .unwrap_or(0),
+        kinds,
+        regions: region_sets,
+        progress: &counter,
+        timings: options.timings,
+    };
+    let outputs: Vec<(Job, JobOutput)> =
+        jobs.par_iter().map(|&job| (job, shared.run(job))).collect();
+    counter.finish();
+    let (runs, detail) = in_config_order(outputs);
+    let trajectory = match (&config.trajectory, shard.index) {
+        (Some(t), 0) => super::trajectory::run(
+            &shared.measure,
+            config,
+            t,
+            &shared.ctx,
+            &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
+        )?,
+        _ => super::trajectory::TrajectoryOutcome {
+            runs: Vec::new(),
+            detail: None,
+        },
+    };
+    Ok(StudyPart {
+        shard,
+        campaigns: held,
+        total_campaigns,
+        runs,
+        detail,
+        limits: shared.regions.iter().map(|r| r.limits.clone()).collect(),
+        trajectory: trajectory.runs,
+        trajectory_detail: trajectory.detail,
+    })
+}
 
-    let ctx = fit_context(world);
-    // Model-based layouts choose each method's points for that method: one selector per distinct design.
+/// One selector per distinct design of the study's methods.
+type Selectors<'a> = Vec<Box<dyn Selector + 'a>>;
+
+/// The selectors of the model-based layouts the study lists, one per distinct design (none when it lists
+/// none), and each method's index into them: a model-based layout chooses each method's points for that
+/// method.
+fn selectors<'a>(
+    config: &StudyConfig,
+    ctx: &FitContext<'a>,
+    world: &'a World,
+    campaign: &'a CampaignConfig,
+) -> Result<(Selectors<'a>, Vec<usize>)> {
     let mut layouts: Vec<Design> = Vec::new();
-    let mut design_of = Vec::with_capacity(kinds.len());
-    for &kind in &kinds {
+    let mut design_of = Vec::with_capacity(config.methods.len());
+    for &kind in &config.methods {
         let design = Design::of(kind);
         design_of.push(
             layouts
@@ -145,22 +223,28 @@ pub fn run_part(
                 }),
         );
     }
-    let selectors: Vec<Box<dyn Selector + '_>> = if config.distributions.iter().any(|d| d.selects())
-    {
+    let selectors = if config.distributions.iter().any(|d| d.selects()) {
         layouts
             .iter()
-            .map(|d| d.selector(&ctx, &world.mounting.nominal, &campaign.selection))
+            .map(|d| d.selector(ctx, &world.mounting.nominal, &campaign.selection))
             .collect::<Result<_>>()?
     } else {
         Vec::new()
     };
-    let measure = Measure {
+    Ok((selectors, design_of))
+}
+
+/// Per region, what every run shares: the measured test set, the ground truth, and the measurement's limits.
+fn region_sets(measure: &Measure, config: &StudyConfig) -> Result<Vec<RegionSets>> {
+    let world = measure.world;
+    let truth = GroundTruth::build(
         world,
-        campaign,
-        regions,
-    };
-    let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth_config())?;
-    let region_sets = regions
+        measure.campaign,
+        measure.regions,
+        &config.ground_truth_config(),
+    )?;
+    measure
+        .regions
         .iter()
         .enumerate()
         .map(|(r, region)| {
@@ -183,10 +267,14 @@ pub fn run_part(
                 truth: region_truth(&truth, &region.name),
             })
         })
-        .collect::<Result<Vec<_>>>()?;
+        .collect()
+}
 
+/// Every campaign of the study in config order (region, layout, size, seed), those `shard` holds with their
+/// indices, and how many there are in all.
+fn jobs(regions: usize, config: &StudyConfig, shard: Shard) -> (Vec<usize>, Vec<Job>, usize) {
     let mut jobs = Vec::new();
-    for region in 0..regions.len() {
+    for region in 0..regions {
         for distribution in 0..config.distributions.len() {
             for size in 0..config.sizes.len() {
                 for seed in 0..config.seeds {
@@ -200,40 +288,19 @@ pub fn run_part(
             }
         }
     }
-    let total_campaigns = jobs.len();
-    let (held, jobs): (Vec<usize>, Vec<Job>) = jobs
+    let total = jobs.len();
+    let (held, jobs) = jobs
         .into_iter()
         .enumerate()
         .filter(|(i, _)| shard.holds(*i))
         .unzip();
-    let total_work = jobs
-        .iter()
-        .map(|j| kinds.len() as u64 * run_weight(config, config.sizes[j.size]))
-        .sum();
-    let counter = Counter::new(progress, jobs.len() * kinds.len(), total_work);
-    let designs = kinds
-        .iter()
-        .map(|&kind| DesignModel::for_method(kind, &ctx, &world.mounting.nominal))
-        .collect::<Result<Vec<_>>>()?;
-    let shared = Shared {
-        measure,
-        config,
-        world,
-        selectors: selectors.iter().map(|s| s.as_ref()).collect(),
-        design_of,
-        ctx,
-        designs,
-        kinds,
-        detail_method,
-        regions: region_sets,
-        progress: &counter,
-    };
-    let outputs: Vec<(Job, JobOutput)> =
-        jobs.par_iter().map(|&job| (job, shared.run(job))).collect();
-    counter.finish();
+    (held, jobs, total)
+}
 
-    // Config order: region, layout, method, size, seed.
-    let mut keyed = Vec::with_capacity(outputs.len() * shared.kinds.len());
+/// The runs of every job in config order (region, layout, method, size, seed), and the detail: the job's at the
+/// largest size among those that may be shown.
+fn in_config_order(outputs: Vec<(Job, JobOutput)>) -> (Vec<RunMetrics>, Option<Detail>) {
+    let mut keyed = Vec::new();
     let mut details = Vec::new();
     for (job, output) in outputs {
         for (m, run) in output.runs {
@@ -244,30 +311,10 @@ pub fn run_part(
         }
     }
     keyed.sort_by_key(|(k, _)| *k);
-    let trajectory = match (&config.trajectory, shard.index) {
-        (Some(t), 0) => super::trajectory::run(
-            &shared.measure,
-            config,
-            t,
-            &shared.ctx,
-            &shared.kinds,
-            &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
-        )?,
-        _ => super::trajectory::TrajectoryOutcome {
-            runs: Vec::new(),
-            detail: None,
-        },
-    };
-    Ok(StudyPart {
-        shard,
-        campaigns: held,
-        total_campaigns,
-        runs: keyed.into_iter().map(|(_, run)| run).collect(),
-        detail: details.into_iter().max_by_key(|d| d.n_train),
-        limits: shared.regions.iter().map(|r| r.limits.clone()).collect(),
-        trajectory: trajectory.runs,
-        trajectory_detail: trajectory.detail,
-    })
+    (
+        keyed.into_iter().map(|(_, run)| run).collect(),
+        details.into_iter().max_by_key(|d| d.n_train),
+    )
 }
 
 /// The measured outcome of one method on one campaign.
@@ -281,10 +328,24 @@ impl Shared<'_> {
         RunKey {
             region: self.measure.regions[job.region].name.clone(),
             distribution: self.config.distributions[job.distribution],
-            method: self.config.methods[m].clone(),
+            method: self.kinds[m],
             n_train: self.config.sizes[job.size],
             seed: job.seed,
         }
+    }
+
+    /// The fit's wall-clock time since `started` (ms) when the study records timings, else NaN.
+    fn fit_ms(&self, started: Instant) -> f64 {
+        if self.timings {
+            started.elapsed().as_secs_f64() * 1e3
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// `fit_ms` of a run whose campaign failed before any fit: 0, or NaN when the study records no timings.
+    fn no_fit_ms(&self) -> f64 {
+        if self.timings { 0.0 } else { f64::NAN }
     }
 
     fn failed(&self, job: Job, m: usize, reason: String, fit_ms: f64) -> RunMetrics {
@@ -363,7 +424,7 @@ impl Shared<'_> {
                     let reason = reason(&e);
                     for &m in &methods {
                         outcomes[m] = Some(MethodRun {
-                            metrics: self.failed(job, m, reason.clone(), 0.0),
+                            metrics: self.failed(job, m, reason.clone(), self.no_fit_ms()),
                             points: None,
                         });
                     }
@@ -454,21 +515,20 @@ impl Shared<'_> {
         detail_job: bool,
     ) -> MethodRun {
         let started = Instant::now();
-        let fitted = registry::fit(self.kinds[m], &self.ctx, train, val);
-        let fit_ms = started.elapsed().as_secs_f64() * 1e3;
-        let model = match fitted {
-            Ok(model) => model,
-            Err(e) => {
-                return MethodRun {
-                    metrics: self.failed(job, m, reason(&e), fit_ms),
-                    points: None,
-                };
-            }
-        };
+        let fitted = self.kinds[m].fit(&self.ctx, train, val);
+        let fit_ms = self.fit_ms(started);
         let sets = &self.regions[job.region];
-        let truth = &sets.truth;
-        let test = match test_errors(model.as_ref(), &sets.test) {
-            Ok(e) => e,
+        let judged = fitted.and_then(|model| {
+            let judged = judge(model.as_ref(), &sets.test, &sets.truth, &self.world.robot)?;
+            match judged.non_finite_view() {
+                Some(view) => Err(Error::Invalid(format!(
+                    "the model's predictions on the {view} are not finite"
+                ))),
+                None => Ok((model, judged)),
+            }
+        });
+        let (model, judged) = match judged {
+            Ok(ok) => ok,
             Err(e) => {
                 return MethodRun {
                     metrics: self.failed(job, m, reason(&e), fit_ms),
@@ -476,40 +536,26 @@ impl Shared<'_> {
                 };
             }
         };
-        let grid = truth_errors(model.as_ref(), truth, &truth.grid.points);
-        let shell = truth_errors(model.as_ref(), truth, &truth.shell.points);
-        let closed = closed_loop_errors(
-            model.as_ref(),
-            truth,
-            &self.world.robot,
-            &truth.closed_loop.points,
-        );
-        let views = [
-            ("test set", &test.position, sets.test.len()),
-            ("ground-truth grid", &grid.position, truth.grid.points.len()),
-            ("shell", &shell.position, truth.shell.points.len()),
-        ];
-        if let Some((view, _, _)) = views
+        let regions: Vec<(&RegionConfig, &GroundTruth)> = self
+            .measure
+            .regions
             .iter()
-            .find(|(_, errors, points)| *points > 0 && Stats::of(errors).is_none())
-        {
-            return MethodRun {
-                metrics: self.failed(
-                    job,
-                    m,
-                    format!("the model's predictions on the {view} are not finite"),
-                    fit_ms,
-                ),
-                points: None,
-            };
-        }
-        let by_distance = self.by_distance(job, model.as_ref(), &grid.position, &shell.position);
+            .zip(&self.regions)
+            .map(|(region, sets)| (region, &sets.truth))
+            .collect();
+        let by_distance = by_distance(
+            model.as_ref(),
+            job.region,
+            &regions,
+            &judged,
+            &self.config.distance_bands_m,
+        );
         let points = detail_job.then(|| PointData {
-            test: test.position.clone(),
+            test: judged.test.position.clone(),
             campaign: (m == self.detail_method).then(|| {
                 (
-                    world_predictions(model.as_ref(), truth, campaign),
-                    grid.position.clone(),
+                    world_predictions(model.as_ref(), &sets.truth, campaign),
+                    judged.grid.position.clone(),
                 )
             }),
         });
@@ -517,76 +563,19 @@ impl Shared<'_> {
             metrics: RunMetrics {
                 key: self.key(job, m),
                 failure: None,
-                test: Stats::of(&test.position),
-                truth: Stats::of(&grid.position),
-                outside: Stats::of(&shell.position),
-                closed_loop: Stats::of(&closed.position),
+                test: Stats::of(&judged.test.position),
+                truth: Stats::of(&judged.grid.position),
+                outside: Stats::of(&judged.shell.position),
+                closed_loop: Stats::of(&judged.closed_loop.position),
                 floor_mean,
-                test_orientation: Stats::of(&test.orientation),
-                truth_orientation: Stats::of(&grid.orientation),
+                test_orientation: Stats::of(&judged.test.orientation),
+                truth_orientation: Stats::of(&judged.grid.orientation),
                 by_distance,
                 observability: None,
                 fit_ms,
             },
             points,
         }
-    }
-
-    /// Ground-truth errors by distance from the job's training region, over the grid and shell of every
-    /// region: the training region's own (`grid`, `shell`, already computed) and the others', predicted here.
-    fn by_distance(
-        &self,
-        job: Job,
-        model: &dyn Fitted,
-        grid: &[f64],
-        shell: &[f64],
-    ) -> Vec<DistanceBand> {
-        let training = &self.measure.regions[job.region];
-        let edges = &self.config.distance_bands_m;
-        let mut bands = Vec::new();
-        for (r, region) in self.measure.regions.iter().enumerate() {
-            let truth = &self.regions[r].truth;
-            let points = truth.grid.points.iter().chain(&truth.shell.points);
-            let errors: Vec<f64> = if r == job.region {
-                grid.iter().chain(shell).copied().collect()
-            } else {
-                let mut e = truth_errors(model, truth, &truth.grid.points).position;
-                e.extend(truth_errors(model, truth, &truth.shell.points).position);
-                e
-            };
-            // Band 0 is inside; band i ≥ 1 is (edge[i-2], edge[i-1]], the last one beyond every edge.
-            let mut sums = vec![(0usize, 0.0f64); edges.len() + 2];
-            for (p, e) in points.zip(&errors) {
-                let d = training.distance(&Point3::from(p.nominal_flange.translation.vector));
-                let band = if d == 0.0 {
-                    0
-                } else {
-                    1 + edges.iter().take_while(|&&b| d > b).count()
-                };
-                sums[band].0 += 1;
-                sums[band].1 += e;
-            }
-            for (band, (count, sum)) in sums.into_iter().enumerate() {
-                if count == 0 {
-                    continue;
-                }
-                let (from_m, to_m) = match band {
-                    0 => (0.0, 0.0),
-                    b => (
-                        if b == 1 { 0.0 } else { edges[b - 2] },
-                        edges.get(b - 1).copied().unwrap_or(f64::INFINITY),
-                    ),
-                };
-                bands.push(DistanceBand {
-                    use_region: region.name.clone(),
-                    from_m,
-                    to_m,
-                    points: count,
-                    mean: sum / count as f64,
-                });
-            }
-        }
-        bands
     }
 
     /// The detail of this job, when its campaign, the nominal model and the detail method all worked.
@@ -599,7 +588,7 @@ impl Shared<'_> {
         val: &Dataset,
         outcomes: &[MethodRun],
     ) -> Option<Detail> {
-        let nominal = registry::fit(MethodKind::Nominal, &self.ctx, train, val).ok()?;
+        let nominal = REFERENCE.fit(&self.ctx, train, val).ok()?;
         let sets = &self.regions[job.region];
         let truth = &sets.truth;
         let before_test = test_errors(nominal.as_ref(), &sets.test).ok()?.position;
@@ -640,7 +629,7 @@ impl Shared<'_> {
             .filter_map(|(m, o)| {
                 let data = o.points.as_ref()?;
                 Some((
-                    self.config.methods[m].clone(),
+                    self.kinds[m],
                     BeforeAfter {
                         before: before_test.clone(),
                         after: data.test.clone(),
@@ -651,7 +640,7 @@ impl Shared<'_> {
         Some(Detail {
             region: region.name.clone(),
             distribution: self.config.distributions[job.distribution],
-            method: self.config.methods[self.detail_method].clone(),
+            method: self.kinds[self.detail_method],
             n_train: self.config.sizes[job.size],
             points,
             grid,

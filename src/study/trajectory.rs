@@ -19,15 +19,16 @@ use super::measure::{Measure, campaign_seed, layout_index};
 use crate::calib::clock;
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
-use crate::calib::registry::{self, MethodKind};
+use crate::calib::registry::MethodKind;
 use crate::campaign::DistributionKind;
 use crate::campaign::config::TrajectoryConfig;
 use crate::campaign::ground_truth::TruePoint;
 use crate::campaign::trajectory::{self, TrajectoryCampaign};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::eval::GroundTruth;
 use crate::eval::Stats;
-use crate::eval::accuracy::{GroundTruth, truth_errors};
+use crate::eval::judge::truth_errors;
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
 
@@ -102,7 +103,10 @@ impl TrajectoryStudy {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrajectoryRun {
     pub region: String,
-    pub method: String,
+    pub method: MethodKind,
+    /// Fitted with the motion as extra inputs ([`TrajectoryStudy::motion_inputs`]).
+    #[serde(default)]
+    pub motion_inputs: bool,
     pub speed: f64,
     /// Training targets the path passes through (the stop-and-go campaign's size).
     pub n_targets: usize,
@@ -118,6 +122,23 @@ pub struct TrajectoryRun {
     /// Ground-truth grid errors of the fitted method (m); `None` when the fit failed.
     pub truth: Option<Stats>,
     pub failure: Option<String>,
+}
+
+impl TrajectoryRun {
+    /// The method as reports name the run: `paper-rotxyz`, or `paper-rotxyz + motion` with the motion as
+    /// inputs.
+    pub fn label(&self) -> String {
+        label(self.method, self.motion_inputs)
+    }
+}
+
+/// A method as the trajectory reports name it, with or without the motion as inputs.
+pub fn label(method: MethodKind, motion_inputs: bool) -> String {
+    if motion_inputs {
+        format!("{method}{MOTION_SUFFIX}")
+    } else {
+        method.to_string()
+    }
 }
 
 /// One sample of the trajectory shown in the recording.
@@ -139,7 +160,7 @@ pub struct TrajectorySample {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct TrajectoryDetail {
     pub region: String,
-    pub method: String,
+    pub method: MethodKind,
     pub speed: f64,
     pub n_targets: usize,
     pub samples: Vec<TrajectorySample>,
@@ -157,156 +178,36 @@ pub(super) fn run(
     config: &StudyConfig,
     study: &TrajectoryStudy,
     ctx: &FitContext,
-    kinds: &[MethodKind],
     truth: &[&GroundTruth],
 ) -> Result<TrajectoryOutcome> {
-    let world = measure.world;
-    let posture = measure.campaign.posture_rad();
-    let detail_n = study.sizes.iter().copied().max().unwrap_or(0);
-    let detail_speed = study.speeds.iter().copied().fold(0.0, f64::max);
+    let shown_n = study.sizes.iter().copied().max().unwrap_or(0);
+    let shown_speed = study.speeds.iter().copied().fold(0.0, f64::max);
     let mut jobs = Vec::new();
     for r in 0..measure.regions.len() {
         for &n in &study.sizes {
             for seed in 0..study.seeds {
                 for &speed in &study.speeds {
-                    jobs.push((r, n, seed, speed));
+                    let shown = r == 0 && n == shown_n && seed == 0 && speed == shown_speed;
+                    jobs.push(PathJob {
+                        r,
+                        n,
+                        seed,
+                        speed,
+                        shown,
+                    });
                 }
             }
         }
     }
-    let out: Vec<(Vec<TrajectoryRun>, Option<TrajectoryDetail>)> = jobs
-        .par_iter()
-        .map(|&(r, n, seed, speed)| {
-            let region = &measure.regions[r].name;
-            let key = campaign_seed(
-                world.seed(),
-                r as u64,
-                layout_index(DistributionKind::Uniform),
-                n as u64,
-                seed,
-            );
-            let failed = |reason: String| {
-                kinds
-                    .iter()
-                    .map(|k| TrajectoryRun {
-                        region: region.clone(),
-                        method: k.name().to_string(),
-                        speed,
-                        n_targets: n,
-                        seed,
-                        samples: 0,
-                        tracker_s: 0.0,
-                        clock_error_s: f64::NAN,
-                        dynamic_max_m: 0.0,
-                        truth: None,
-                        failure: Some(reason.clone()),
-                    })
-                    .collect::<Vec<_>>()
-            };
-            let failed = |reason: String| (failed(reason), None);
-            let measured = measure
-                .campaign(r, DistributionKind::Uniform, config.campaign_points(n), key)
-                .and_then(|planned| {
-                    trajectory::measure(world, &planned, &posture, &study.config(speed), key)
-                });
-            let measured = match measured {
-                Ok(m) => m,
-                Err(e) => return failed(e.detail()),
-            };
-            let prepared = (|| -> Result<_> {
-                let data = as_dataset(&measured.campaign, "the trajectory campaign")?;
-                let offset = clock::estimate(&world.dh, &data, study.clock_bound_s)?;
-                let data = clock::corrected(&data, offset.offset_s)?;
-                let mut order: Vec<usize> = (0..data.len()).collect();
-                order.shuffle(&mut derive(key, Stream::Split, &[1]));
-                let n_train =
-                    ((data.len() as f64) / (1.0 + config.validation_ratio)).round() as usize;
-                let (mut train, mut val) = (order[..n_train].to_vec(), order[n_train..].to_vec());
-                train.sort_unstable();
-                val.sort_unstable();
-                if val.is_empty() {
-                    return Err(Error::Invalid("too few samples to validate".into()));
-                }
-                Ok((train, val, offset.offset_s, data))
-            })();
-            let (train_rows, val_rows, offset, data) = match prepared {
-                Ok(p) => p,
-                Err(e) => return failed(e.detail()),
-            };
-            let (train, val) = (data.subset(&train_rows), data.subset(&val_rows));
-            let dynamic_max_m = measured.dynamic_m.iter().fold(0.0f64, |a, b| a.max(*b));
-            let shown = r == 0 && n == detail_n && seed == 0 && speed == detail_speed;
-            let mut detail = None;
-            let run_of =
-                |method: String, truth: Option<Stats>, failure: Option<String>| TrajectoryRun {
-                    region: region.clone(),
-                    method,
-                    speed,
-                    n_targets: n,
-                    seed,
-                    samples: train.len() + val.len(),
-                    tracker_s: measured.duration_s,
-                    clock_error_s: offset - study.clock_offset_s,
-                    dynamic_max_m,
-                    truth,
-                    failure,
-                };
-            let mut runs: Vec<TrajectoryRun> = kinds
-                .iter()
-                .map(|&kind| {
-                    let fitted = registry::fit(kind, ctx, &train, &val);
-                    let (truth, failure) = match fitted {
-                        Ok(model) => {
-                            if shown && kind.name() == config.detail_method() {
-                                detail = Some(sampled(
-                                    model.as_ref(),
-                                    truth[r],
-                                    &measured,
-                                    &data,
-                                    (region, speed, n),
-                                ));
-                            }
-                            (
-                                Stats::of(
-                                    &truth_errors(model.as_ref(), truth[r], &truth[r].grid.points)
-                                        .position,
-                                ),
-                                None,
-                            )
-                        }
-                        Err(e) => (None, Some(e.detail())),
-                    };
-                    run_of(kind.name().to_string(), truth, failure)
-                })
-                .collect();
-            if study.motion_inputs {
-                let moving = match with_motion_inputs(&data, &world.nominal, &ctx.payload) {
-                    Ok(m) => m,
-                    Err(e) => return failed(e.detail()),
-                };
-                let (train, val) = (moving.subset(&train_rows), moving.subset(&val_rows));
-                for &kind in kinds.iter().filter(|k| k.info().takes_inputs) {
-                    let (truth, failure) = match registry::fit(kind, ctx, &train, &val) {
-                        Ok(model) => (
-                            Stats::of(
-                                // At the inputs' defaults: the motion's are zero, the arm at rest.
-                                &truth_errors(model.as_ref(), truth[r], &truth[r].grid.points)
-                                    .position,
-                            ),
-                            None,
-                        ),
-                        Err(e) => (None, Some(e.detail())),
-                    };
-                    runs.push(run_of(
-                        format!("{}{MOTION_SUFFIX}", kind.name()),
-                        truth,
-                        failure,
-                    ));
-                }
-            }
-            (runs, detail)
-        })
-        .collect();
+    let context = PathContext {
+        measure,
+        config,
+        study,
+        ctx,
+        truth,
+    };
+    let out: Vec<(Vec<TrajectoryRun>, Option<TrajectoryDetail>)> =
+        jobs.par_iter().map(|&job| context.run(job)).collect();
     let mut outcome = TrajectoryOutcome {
         runs: Vec::new(),
         detail: None,
@@ -318,11 +219,237 @@ pub(super) fn run(
     Ok(outcome)
 }
 
+/// One trajectory campaign: region `r`, `n` targets, repetition `seed`, `speed`; `shown` when the recording
+/// shows it sample by sample.
+#[derive(Clone, Copy)]
+struct PathJob {
+    r: usize,
+    n: usize,
+    seed: u64,
+    speed: f64,
+    shown: bool,
+}
+
+/// What every trajectory campaign shares.
+struct PathContext<'a> {
+    measure: &'a Measure<'a>,
+    config: &'a StudyConfig,
+    study: &'a TrajectoryStudy,
+    ctx: &'a FitContext<'a>,
+    truth: &'a [&'a GroundTruth],
+}
+
+/// A trajectory campaign's samples, clock-corrected, and which of them train and validate.
+struct Samples {
+    data: Dataset,
+    train: Vec<usize>,
+    val: Vec<usize>,
+    offset_s: f64,
+}
+
+impl PathContext<'_> {
+    /// The runs of every method on `job`'s campaign (failed runs when the campaign or its clock fails), and its
+    /// detail when it is shown.
+    fn run(&self, job: PathJob) -> (Vec<TrajectoryRun>, Option<TrajectoryDetail>) {
+        let key = campaign_seed(
+            self.measure.world.seed(),
+            job.r as u64,
+            layout_index(DistributionKind::Uniform),
+            job.n as u64,
+            job.seed,
+        );
+        let failed = |e: Error| (self.failed(job, e.detail()), None);
+        let measured = match self.measure_path(job, key) {
+            Ok(m) => m,
+            Err(e) => return failed(e),
+        };
+        let samples = match self.samples(&measured, key) {
+            Ok(s) => s,
+            Err(e) => return failed(e),
+        };
+        let template = TrajectoryRun {
+            region: self.measure.regions[job.r].name.clone(),
+            // Each run sets its own method.
+            method: MethodKind::ALL[0],
+            motion_inputs: false,
+            speed: job.speed,
+            n_targets: job.n,
+            seed: job.seed,
+            samples: samples.train.len() + samples.val.len(),
+            tracker_s: measured.duration_s,
+            clock_error_s: samples.offset_s - self.study.clock_offset_s,
+            dynamic_max_m: measured.dynamic_m.iter().fold(0.0f64, |a, b| a.max(*b)),
+            truth: None,
+            failure: None,
+        };
+        let (mut runs, detail) = self.fit_each(job, &template, &samples, &measured);
+        if self.study.motion_inputs {
+            match self.fit_with_motion(job, &template, &samples) {
+                Ok(moving) => runs.extend(moving),
+                Err(e) => return failed(e),
+            }
+        }
+        (runs, detail)
+    }
+
+    /// Every method's run on `job`, failed for `reason`.
+    fn failed(&self, job: PathJob, reason: String) -> Vec<TrajectoryRun> {
+        self.config
+            .methods
+            .iter()
+            .map(|&method| TrajectoryRun {
+                region: self.measure.regions[job.r].name.clone(),
+                method,
+                motion_inputs: false,
+                speed: job.speed,
+                n_targets: job.n,
+                seed: job.seed,
+                samples: 0,
+                tracker_s: 0.0,
+                clock_error_s: f64::NAN,
+                dynamic_max_m: 0.0,
+                truth: None,
+                failure: Some(reason.clone()),
+            })
+            .collect()
+    }
+
+    /// The path through the stop-and-go campaign's targets of `job`, measured on the fly.
+    fn measure_path(&self, job: PathJob, key: u64) -> Result<TrajectoryCampaign> {
+        let planned = self.measure.campaign(
+            job.r,
+            DistributionKind::Uniform,
+            self.config.campaign_points(job.n),
+            key,
+        )?;
+        let posture = self.measure.campaign.posture_rad();
+        trajectory::measure(
+            self.measure.world,
+            &planned,
+            &posture,
+            &self.study.config(job.speed),
+            key,
+        )
+    }
+
+    /// The campaign's samples with the clock offset removed, split at random into training and validation
+    /// samples in the study's ratio.
+    fn samples(&self, measured: &TrajectoryCampaign, key: u64) -> Result<Samples> {
+        let data = as_dataset(&measured.campaign, "the trajectory campaign")?;
+        let offset = clock::estimate(&self.measure.world.dh, &data, self.study.clock_bound_s)?;
+        let data = clock::corrected(&data, offset.offset_s)?;
+        let mut order: Vec<usize> = (0..data.len()).collect();
+        order.shuffle(&mut derive(key, Stream::Split, &[1]));
+        let n_train = ((data.len() as f64) / (1.0 + self.config.validation_ratio)).round() as usize;
+        let (mut train, mut val) = (order[..n_train].to_vec(), order[n_train..].to_vec());
+        train.sort_unstable();
+        val.sort_unstable();
+        if val.is_empty() {
+            return Err(Error::Invalid("too few samples to validate".into()));
+        }
+        Ok(Samples {
+            data,
+            train,
+            val,
+            offset_s: offset.offset_s,
+        })
+    }
+
+    /// Every method fitted on the samples and judged on the region's static grid; the detail method's error at
+    /// every sample when the campaign is shown.
+    fn fit_each(
+        &self,
+        job: PathJob,
+        template: &TrajectoryRun,
+        samples: &Samples,
+        measured: &TrajectoryCampaign,
+    ) -> (Vec<TrajectoryRun>, Option<TrajectoryDetail>) {
+        let truth = self.truth[job.r];
+        let (train, val) = (
+            samples.data.subset(&samples.train),
+            samples.data.subset(&samples.val),
+        );
+        let mut detail = None;
+        let runs = self
+            .config
+            .methods
+            .iter()
+            .map(|&method| {
+                let (truth, failure) = match method.fit(self.ctx, &train, &val) {
+                    Ok(model) => {
+                        if job.shown && Some(method) == self.config.detail_method() {
+                            detail = Some(sampled(
+                                method,
+                                model.as_ref(),
+                                truth,
+                                measured,
+                                &samples.data,
+                                (&template.region, job.speed, job.n),
+                            ));
+                        }
+                        (grid_stats(model.as_ref(), truth), None)
+                    }
+                    Err(e) => (None, Some(e.detail())),
+                };
+                TrajectoryRun {
+                    method,
+                    truth,
+                    failure,
+                    ..template.clone()
+                }
+            })
+            .collect();
+        (runs, detail)
+    }
+
+    /// Every method that regresses on extra inputs, fitted again with the motion as inputs, judged at rest.
+    fn fit_with_motion(
+        &self,
+        job: PathJob,
+        template: &TrajectoryRun,
+        samples: &Samples,
+    ) -> Result<Vec<TrajectoryRun>> {
+        let moving = with_motion_inputs(
+            &samples.data,
+            &self.measure.world.nominal,
+            &self.ctx.payload,
+        )?;
+        let (train, val) = (moving.subset(&samples.train), moving.subset(&samples.val));
+        let truth = self.truth[job.r];
+        Ok(self
+            .config
+            .methods
+            .iter()
+            .filter(|k| k.info().takes_inputs)
+            .map(|&method| {
+                let (truth, failure) = match method.fit(self.ctx, &train, &val) {
+                    // At the inputs' defaults: the motion's are zero, the arm at rest.
+                    Ok(model) => (grid_stats(model.as_ref(), truth), None),
+                    Err(e) => (None, Some(e.detail())),
+                };
+                TrajectoryRun {
+                    method,
+                    motion_inputs: true,
+                    truth,
+                    failure,
+                    ..template.clone()
+                }
+            })
+            .collect())
+    }
+}
+
+/// Statistics of `model`'s errors on the ground-truth grid.
+fn grid_stats(model: &dyn Fitted, truth: &GroundTruth) -> Option<Stats> {
+    Stats::of(&truth_errors(model, truth, &truth.grid.points).position)
+}
+
 /// The name suffix of a method fitted with the motion as inputs.
 pub const MOTION_SUFFIX: &str = " + motion";
 
 /// The detail method's error at every sample of `measured` (`data`: the same samples, clock-corrected).
 fn sampled(
+    method: MethodKind,
     model: &dyn Fitted,
     truth: &GroundTruth,
     measured: &TrajectoryCampaign,
@@ -345,7 +472,7 @@ fn sampled(
     let errors = truth_errors(model, truth, &points).position;
     TrajectoryDetail {
         region: region.to_string(),
-        method: model.info().name.to_string(),
+        method,
         speed,
         n_targets,
         samples: measured

@@ -73,7 +73,7 @@ pub use solve::Termination;
 
 use super::domain::Domain;
 use super::error_model::{ErrorFrames, FrameErrors};
-use super::method::{Basis, Design, FitContext, Fitted, MethodInfo, Prediction};
+use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -114,6 +114,26 @@ pub const ELASTIC: MethodInfo = MethodInfo {
     base: None,
     design: Design::Identification { elastic: true },
 };
+
+/// `kinematic`, and `elastic` with the joint compliances: one fitting.
+pub struct Kinematic {
+    pub elastic: bool,
+}
+
+impl Method for Kinematic {
+    fn info(&self) -> &'static MethodInfo {
+        if self.elastic { &ELASTIC } else { &KINEMATIC }
+    }
+
+    fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
+        Ok(Box::new(KinematicModel::fit(
+            self.elastic,
+            ctx,
+            train,
+            val,
+        )?))
+    }
+}
 
 fn method_from_name<'de, D: serde::Deserializer<'de>>(
     d: D,
