@@ -40,7 +40,7 @@ fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool) {
     let ctx = FitContext {
         chain: &sim.world.nominal,
         dh: &dh,
-        payload: scenario.robot.payload(),
+        payload: scenario.world.robot.payload(),
         regression: RegressionOptions {
             cross_terms,
             ..RegressionOptions::default()
@@ -59,7 +59,7 @@ fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool) {
         runs.sort();
         println!(
             "{:<16} fit {:<22}{} on {} training + {} validation points, one core: {:.1} ms",
-            scenario.name,
+            scenario.world.name,
             kind.name(),
             if cross_terms { " (cross terms)" } else { "" },
             train.len(),

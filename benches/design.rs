@@ -24,7 +24,7 @@ fn main() {
     let sim = simulate(&scenario).expect("the scenario simulates");
     let dh = DhChain::from_chain(&sim.world.nominal).expect("DH");
     let ctx = FitContext {
-        payload: scenario.robot.payload(),
+        payload: scenario.world.robot.payload(),
         ..FitContext::new(&sim.world.nominal, &dh)
     };
     let single = rayon::ThreadPoolBuilder::new()

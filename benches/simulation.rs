@@ -79,7 +79,7 @@ fn main() {
     // lost motion, soft zone, perpendicular tilt, thermal warm-up, tracker systematics), each pose reached
     // after its place in the sequence.
     let mut every = scenario.clone();
-    let t = &mut every.truth;
+    let t = &mut every.world.truth;
     t.link_mass_spread = 0.1;
     t.link_com_m = 0.01;
     t.cable_kg_per_m = 0.5;
@@ -105,11 +105,11 @@ fn main() {
         expansion_per_k: 23e-6,
         reference_c: 20.0,
     });
-    every.tracker.range_offset_m = 5e-6;
-    every.tracker.range_scale = 1e-6;
-    every.tracker.azimuth_eccentricity_rad = [3e-6, -2e-6];
-    every.tracker.elevation_eccentricity_rad = [1e-6, 2e-6];
-    every.tracker.vertical_index_offset_rad = 2e-6;
+    every.world.tracker.range_offset_m = 5e-6;
+    every.world.tracker.range_scale = 1e-6;
+    every.world.tracker.azimuth_eccentricity_rad = [3e-6, -2e-6];
+    every.world.tracker.elevation_eccentricity_rad = [1e-6, 2e-6];
+    every.world.tracker.vertical_index_offset_rad = 2e-6;
     let world = calibench::app::world(&every).expect("every effect on builds a world");
     let visits = calibench::truth::history::sequence(
         &world.robot.perturbation,

@@ -21,28 +21,81 @@ use crate::truth::ErrorModel;
 pub use crate::world::RobotConfig;
 use crate::world::WorldConfig;
 
+/// A scenario: its world (name, seed, robot, true errors, tracker, reflectors) and what the stages do in it. The
+/// file writes every section at the top level; it is read and written through `ScenarioFile`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "ScenarioFile", into = "ScenarioFile")]
 pub struct Scenario {
-    /// Names the results directory and every report row.
-    pub name: String,
-    /// Every random draw of the scenario derives from this seed.
-    pub seed: u64,
-    pub robot: RobotConfig,
-    pub truth: ErrorModel,
-    pub tracker: TrackerConfig,
-    pub reflectors: ReflectorConfig,
+    /// What the scenario's world is made of: its name, seed, robot, true errors, tracker and reflectors.
+    pub world: WorldConfig,
     pub campaign: CampaignConfig,
     pub regions: Vec<RegionConfig>,
     /// What to fit on the campaign and how to judge it; no evaluation when absent.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationConfig>,
     /// The sweep over training-set sizes, layouts, methods and seeds; no study when absent.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub study: Option<StudyConfig>,
     /// Where the scenario came from (its path), for messages; not part of the file.
-    #[serde(skip)]
     pub origin: String,
+}
+
+/// A scenario as its file writes it, every section at the top level. A flattened [`WorldConfig`] cannot stand
+/// in for the world's keys: serde's `flatten` neither refuses unknown keys (`deny_unknown_fields`) nor keeps
+/// the line and column of a fault inside the world's sections.
+#[derive(Serialize, Deserialize)]
+#[serde(rename = "Scenario", deny_unknown_fields)]
+struct ScenarioFile {
+    /// Names the results directory and every report row.
+    name: String,
+    /// Every random draw of the scenario derives from this seed.
+    seed: u64,
+    robot: RobotConfig,
+    truth: ErrorModel,
+    tracker: TrackerConfig,
+    reflectors: ReflectorConfig,
+    campaign: CampaignConfig,
+    regions: Vec<RegionConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    evaluation: Option<EvaluationConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    study: Option<StudyConfig>,
+}
+
+impl From<ScenarioFile> for Scenario {
+    fn from(f: ScenarioFile) -> Scenario {
+        Scenario {
+            world: WorldConfig {
+                name: f.name,
+                seed: f.seed,
+                robot: f.robot,
+                truth: f.truth,
+                tracker: f.tracker,
+                reflectors: f.reflectors,
+            },
+            campaign: f.campaign,
+            regions: f.regions,
+            evaluation: f.evaluation,
+            study: f.study,
+            origin: String::new(),
+        }
+    }
+}
+
+impl From<Scenario> for ScenarioFile {
+    fn from(s: Scenario) -> ScenarioFile {
+        let w = s.world;
+        ScenarioFile {
+            name: w.name,
+            seed: w.seed,
+            robot: w.robot,
+            truth: w.truth,
+            tracker: w.tracker,
+            reflectors: w.reflectors,
+            campaign: s.campaign,
+            regions: s.regions,
+            evaluation: s.evaluation,
+            study: s.study,
+        }
+    }
 }
 
 impl Scenario {
@@ -55,7 +108,7 @@ impl Scenario {
             message: format!("cannot read: {e}"),
         })?;
         let mut scenario = Scenario::parse(&text, &origin)?;
-        scenario.robot.urdf = resolve(&scenario.robot.urdf, path.parent());
+        scenario.world.robot.urdf = resolve(&scenario.world.robot.urdf, path.parent());
         Ok(scenario)
     }
 
@@ -100,13 +153,14 @@ impl Scenario {
 
     /// Checks that need no robot: the robot-dependent ones happen in [`Scenario::load_robot`].
     fn validate(&self) -> std::result::Result<(), String> {
-        if self.name.trim().is_empty() || self.name.contains(['/', '\\']) {
+        let w = &self.world;
+        if w.name.trim().is_empty() || w.name.contains(['/', '\\']) {
             return Err(format!(
                 "name '{}' must be non-empty and contain no path separator",
-                self.name
+                w.name
             ));
         }
-        let p = &self.robot;
+        let p = &w.robot;
         if !(p.payload_kg.is_finite() && p.payload_kg >= 0.0)
             || p.payload_com_m.iter().any(|c| !c.is_finite())
         {
@@ -124,7 +178,7 @@ impl Scenario {
                 return Err(format!("regions[{i}]: the name '{}' is used twice", r.name));
             }
         }
-        self.reflectors
+        w.reflectors
             .validate()
             .map_err(|m| format!("reflectors: {m}"))?;
         self.campaign
@@ -152,26 +206,16 @@ impl Scenario {
         Ok(())
     }
 
-    /// The parts of the scenario that make its world.
-    pub fn world_config(&self) -> WorldConfig {
-        WorldConfig {
-            name: self.name.clone(),
-            seed: self.seed,
-            robot: self.robot.clone(),
-            truth: self.truth.clone(),
-            tracker: self.tracker.clone(),
-            reflectors: self.reflectors.clone(),
-        }
-    }
-
     /// Loads the scenario's robot and checks the fields that depend on it (joint counts).
     pub fn load_robot(&self) -> Result<Chain> {
-        let chain = crate::robot::load(&self.robot.urdf, self.robot.flange_link.as_deref())?;
+        let robot = &self.world.robot;
+        let chain = crate::robot::load(&robot.urdf, robot.flange_link.as_deref())?;
         let scenario_err = |message: String| Error::Scenario {
             origin: self.origin.clone(),
             message,
         };
-        self.truth
+        self.world
+            .truth
             .validate(chain.dof())
             .map_err(|e| scenario_err(e.detail()))?;
         if self.campaign.posture_deg.len() != chain.dof() {

@@ -531,8 +531,8 @@ fn every_effect_on_is_deterministic_across_threads_and_writes_the_temperature_in
 fn a_sequence_is_measured_in_its_order_with_lost_motion() {
     let mut scenario =
         calibench::scenario::Scenario::parse(&every_effect(POINTS), "every effect").unwrap();
-    scenario.truth.repeatability_rad = 0.0;
-    scenario.truth.thermal = None;
+    scenario.world.truth.repeatability_rad = 0.0;
+    scenario.world.truth.thermal = None;
     let world = calibench::app::world(&scenario).unwrap();
     let generator = calibench::campaign::Generator {
         world: &world,

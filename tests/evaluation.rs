@@ -85,7 +85,7 @@ fn fixture(text: &str) -> Fixture {
 #[test]
 fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
     let f = paper();
-    let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
+    let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     assert!(test.len() >= 250, "{}", test.len());
     let oracle = Oracle::new(&f.sim.world).unwrap();
     let errors = test_errors(&oracle, &test).unwrap();
@@ -115,12 +115,13 @@ fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
 #[test]
 fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
     let f = paper();
-    let (train, val, _) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
+    let (train, val, _) =
+        split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
         chain: &f.sim.world.nominal,
         dh: &dh,
-        payload: f.scenario.robot.payload(),
+        payload: f.scenario.world.robot.payload(),
         regression: RegressionOptions::default(),
     };
     let model = MethodKind::Nominal.fit(&ctx, &train, &val).unwrap();
@@ -168,12 +169,13 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
     let max = e.position.iter().copied().fold(0.0, f64::max);
     assert!(max <= 1e-6, "oracle closed-loop error {max:.3e} m");
 
-    let (train, val, _) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
+    let (train, val, _) =
+        split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
         chain: &f.sim.world.nominal,
         dh: &dh,
-        payload: f.scenario.robot.payload(),
+        payload: f.scenario.world.robot.payload(),
         regression: RegressionOptions::default(),
     };
     let nominal = MethodKind::Nominal.fit(&ctx, &train, &val).unwrap();
@@ -188,7 +190,7 @@ fn with_a_nest_the_oracle_orientation_is_exact_on_the_truth_and_in_closed_loop()
     let f = pose();
     let oracle = Oracle::new(&f.sim.world).unwrap();
     assert!(oracle.models_orientation());
-    let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.seed).unwrap();
+    let (_, _, test) = split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let e = test_errors(&oracle, &test).unwrap();
     assert_eq!(e.orientation.len(), test.len());
     // The nest is rotated by 0.22 rad on its mount: an oracle that missed it would be off by that much.

@@ -374,7 +374,7 @@ fn paper_campaign(points: usize, seed: u64) -> (Chain, DhChain, Payload, Dataset
     let data =
         Dataset::from_reader(csv.as_slice(), "campaign", &sim.world.nominal.joint_names()).unwrap();
     let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
-    (sim.world.nominal, dh, scenario.robot.payload(), data)
+    (sim.world.nominal, dh, scenario.world.robot.payload(), data)
 }
 
 /// The structurally identifiable set is a property of the robot and the mounting; what a campaign determines
@@ -463,7 +463,7 @@ fn a_nest_campaign_fits_the_orientation() {
     let data =
         Dataset::from_reader(csv.as_slice(), "campaign", &sim.world.nominal.joint_names()).unwrap();
     let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
-    let ctx = context(&sim.world.nominal, &dh, scenario.robot.payload());
+    let ctx = context(&sim.world.nominal, &dh, scenario.world.robot.payload());
     let n = data.len();
     let (train, test) = (data.subset(&range(0, 350)), data.subset(&range(350, n)));
     let true_points: Vec<Vec<Point3<f64>>> = sim.campaign.points[350..n]
@@ -537,11 +537,11 @@ fn geometric_only_comes_within_ten_percent_of_the_oracle() {
         &sim.world.nominal.joint_names(),
     )
     .unwrap();
-    let labels = random_split(data.len(), [0.5, 0.25, 0.25], scenario.seed).unwrap();
+    let labels = random_split(data.len(), [0.5, 0.25, 0.25], scenario.world.seed).unwrap();
     let pick = |s: Split| -> Vec<usize> { (0..data.len()).filter(|&i| labels[i] == s).collect() };
     let (train, val, test) = (pick(Split::Train), pick(Split::Val), pick(Split::Test));
     let dh = DhChain::from_chain(&sim.world.nominal).unwrap();
-    let ctx = context(&sim.world.nominal, &dh, scenario.robot.payload());
+    let ctx = context(&sim.world.nominal, &dh, scenario.world.robot.payload());
     let model = KinematicModel::fit(false, &ctx, &data.subset(&train), &data.subset(&val)).unwrap();
     let obs = model.registration().observe(&data.subset(&test)).unwrap();
     let fitted = mean(

@@ -53,7 +53,7 @@ fn rapier_deflection_gives_the_same_campaign() {
     let text = text.replace(tilt, "");
     let fast = Scenario::parse(&text, "fast").unwrap();
     let mut physics = fast.clone();
-    physics.truth.deflection = DeflectionSolver::Rapier;
+    physics.world.truth.deflection = DeflectionSolver::Rapier;
     let (a, b) = (simulate(&fast).unwrap(), simulate(&physics).unwrap());
     assert_eq!(a.campaign.points.len(), 40);
     assert_eq!(b.campaign.points.len(), 40);

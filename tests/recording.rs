@@ -161,7 +161,7 @@ fn study(chain: &Chain) -> StudyResult {
         trajectory: None,
     };
     StudyResult {
-        world: scenario.world_config(),
+        world: scenario.world.clone(),
         config,
         regions,
         runs,

@@ -24,7 +24,7 @@ fn series_c() -> PathBuf {
 fn ur10_ipa() -> Scenario {
     let mut s =
         Scenario::load(root().join("scenarios/ur10_ipa.toml")).expect("the shipped scenario");
-    s.robot.urdf = root().join("robots/ur10.urdf");
+    s.world.robot.urdf = root().join("robots/ur10.urdf");
     s
 }
 
@@ -115,13 +115,13 @@ fn a_replay_measures_the_real_configurations_in_the_files_order() {
 /// pose and the reflector offset exactly, whatever they are.
 fn exact_world(yaw: f64, tilt: [f64; 2], position: [f64; 3], reflector: [f64; 3]) -> Scenario {
     let mut s = ur10_ipa();
-    s.truth = calibench::truth::ErrorModel::stiff_only(vec![1e12; 6]);
-    let k = &mut s.tracker;
+    s.world.truth = calibench::truth::ErrorModel::stiff_only(vec![1e12; 6]);
+    let k = &mut s.world.tracker;
     (k.range_sigma_m, k.range_sigma_per_m, k.angle_sigma_rad) = (0.0, 0.0, 0.0);
     (k.range_offset_m, k.range_scale, k.vertical_index_offset_rad) = (0.0, 0.0, 0.0);
     (k.azimuth_eccentricity_rad, k.elevation_eccentricity_rad) = ([0.0; 2], [0.0; 2]);
     (k.position_m, k.yaw_deg, k.tilt_deg) = (position, yaw, tilt);
-    s.reflectors.nominal_m = vec![reflector];
+    s.world.reflectors.nominal_m = vec![reflector];
     s
 }
 
@@ -155,7 +155,7 @@ fn the_replay_places_the_tracker_and_the_reflector_where_they_were() {
         moved < 1e-8 && turned < 1e-9,
         "tracker off by {moved} m, {turned} rad"
     );
-    let t = &done.scenario.tracker;
+    let t = &done.scenario.world.tracker;
     assert!((t.yaw_deg - yaw).abs() < 1e-8, "yaw {}", t.yaw_deg);
     assert!((t.tilt_deg[0] - tilt[0]).abs() < 1e-8 && (t.tilt_deg[1] - tilt[1]).abs() < 1e-8);
     let m = done.replay.unwrap().mounting_m;
@@ -189,7 +189,7 @@ fn every_row_is_measured_even_where_the_simulated_tracker_would_not_see_it() {
     let dir = TempDir::new().unwrap();
     let mut scenario = ur10_ipa();
     // A 1° acceptance cone would refuse nearly every configuration of a planned campaign.
-    scenario.tracker.acceptance_half_angle_deg = 1.0;
+    scenario.world.tracker.acceptance_half_angle_deg = 1.0;
     let done = replay(
         scenario,
         &series_c(),
@@ -266,7 +266,7 @@ fn the_simulated_tables_stand_beside_the_real_ones() {
         .map(|d| d.subset(&(0..d.len()).step_by(8).collect::<Vec<_>>()))
         .collect();
     let mut exact = exact_world(0.0, [0.0, 0.0], [0.0, 3.0, 1.0], [0.0, 0.0, 0.1]);
-    exact.tracker.orientation_sigma_rad = 0.0;
+    exact.world.tracker.orientation_sigma_rad = 0.0;
     let (sim, placements) = simulate_series(&exact, &real).unwrap();
     assert_eq!(placements.len(), 3);
     for (r, s) in real.iter().zip(&sim) {

@@ -152,7 +152,7 @@ pub fn study(orientation: bool) -> StudyResult {
             histograms,
             tracker: Isometry3::identity(),
         },
-        world: scenario.world_config(),
+        world: scenario.world.clone(),
         config,
         regions,
         runs,

@@ -159,7 +159,7 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
     let out = options
         .out
         .clone()
-        .unwrap_or_else(|| PathBuf::from("results").join(&scenario.name));
+        .unwrap_or_else(|| PathBuf::from("results").join(&scenario.world.name));
     let q = world.tracker.pose.rotation.quaternion();
     let report = json!({
         "scenario": scenario,

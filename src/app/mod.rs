@@ -82,7 +82,7 @@ pub fn check_study_budget(scenario: &Scenario, threads: usize, long: bool) -> Re
 /// The scenario's world: its robot loaded and checked, the true robot, tracker and mounting drawn from its seed.
 /// Evaluation poses are approached from the campaign's posture.
 pub fn world(scenario: &Scenario) -> Result<World> {
-    let mut world = World::new(scenario.load_robot()?, scenario.world_config())
+    let mut world = World::new(scenario.load_robot()?, scenario.world.clone())
         .map_err(|e| e.in_scenario(&scenario.origin))?;
     world.robot.set_approach(&scenario.campaign.posture_rad());
     Ok(world)

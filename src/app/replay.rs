@@ -65,22 +65,27 @@ pub fn replay(scenario: &mut Scenario, data: &Dataset, index: u64) -> Result<Rep
             ),
         })?;
     let (tracker, placement_residual_rad) = scenario
+        .world
         .tracker
         .placed_at(&registration.frame.tracker_to_base);
-    scenario.tracker = tracker;
+    scenario.world.tracker = tracker;
     let mounting = registration.frame.mounting;
-    scenario.reflectors.nominal_m = match &registration.nest {
+    scenario.world.reflectors.nominal_m = match &registration.nest {
         Some(nest) => nest
             .iter()
             .map(|p| (p.coords + mounting.coords).into())
             .collect(),
         None => vec![mounting.coords.into()],
     };
-    scenario.reflectors.validate().map_err(|m| Error::Data {
-        origin: data.origin.clone(),
-        message: format!("the registered reflectors: {m}"),
-    })?;
-    let world = World::new(chain, scenario.world_config())?;
+    scenario
+        .world
+        .reflectors
+        .validate()
+        .map_err(|m| Error::Data {
+            origin: data.origin.clone(),
+            message: format!("the registered reflectors: {m}"),
+        })?;
+    let world = World::new(chain, scenario.world.clone())?;
     let campaign = Generator {
         world: &world,
         config: &scenario.campaign,

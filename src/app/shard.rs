@@ -76,7 +76,7 @@ pub fn run_shard(
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| {
         PathBuf::from("results").join(format!(
             "{}-shard-{}-of-{}",
-            scenario.name, shard.index, shard.count
+            scenario.world.name, shard.index, shard.count
         ))
     });
     output::check_dir(&out, SHARD_OUTPUTS)?;
@@ -126,7 +126,7 @@ pub fn run_shard(
         SHARD_OUTPUTS,
     )?;
     Ok(ShardRun {
-        scenario: scenario.name.clone(),
+        scenario: scenario.world.name.clone(),
         shard,
         campaigns: part.campaigns.len(),
         total_campaigns: part.total_campaigns,
@@ -204,10 +204,10 @@ pub fn merge(dirs: &[PathBuf], out: Option<PathBuf>) -> Result<CampaignRun> {
                     "shard.json",
                     format!(
                         "scenario '{}' ({}…) differs from {}'s '{}' ({}…): shards of different studies",
-                        manifest.scenario.name,
+                        manifest.scenario.world.name,
                         &manifest.scenario_sha256[..12],
                         first_dir.display(),
-                        f.scenario.name,
+                        f.scenario.world.name,
                         &f.scenario_sha256[..12]
                     ),
                 ));

@@ -59,7 +59,7 @@ pub fn simulate_series(
         let mut scenario = scenario.clone();
         let r = replay::replay(&mut scenario, data, k as u64)?;
         sims.push(replay::as_dataset(&r, data)?);
-        let t = &scenario.tracker;
+        let t = &scenario.world.tracker;
         placements.push(Placement {
             series: series.to_string(),
             registration_rms_mm: r.registration.frame.rms * 1e3,
@@ -228,7 +228,7 @@ pub fn run(options: &Options, scenario: &Path, show: &mut dyn FnMut(&str)) -> Re
         &chain,
     )?;
     let (sim, placements) = simulate_series(&scenario, &real)?;
-    show(&placements_md(&placements, &scenario.name));
+    show(&placements_md(&placements, &scenario.world.name));
     let sizes = options.sizes.as_deref();
     let quiet = &mut |_: &str| {};
     let real_tables = real_data::tables(&METHODS, &ctx, &real, sizes, options.draws, quiet)?;

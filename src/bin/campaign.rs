@@ -184,7 +184,7 @@ fn print(done: &CampaignRun) {
     let campaign = &done.sim.campaign;
     println!(
         "scenario '{}': {} points in {:.2} s",
-        done.scenario.name,
+        done.scenario.world.name,
         campaign.points.len(),
         done.generated.as_secs_f64()
     );
@@ -240,7 +240,7 @@ fn print(done: &CampaignRun) {
     row("true, elastic deflection only", &done.budget.elastic_only);
     row("true, rigid errors only", &done.budget.rigid_only);
     if let Some(r) = &done.replay {
-        let t = &done.scenario.tracker;
+        let t = &done.scenario.world.tracker;
         let m = r.mounting_m.map(|v| v * 1e3);
         println!(
             "replayed {} rows of {}: real data registered with RMS {:.4} mm; tracker placed at [{:.4}, {:.4}, {:.4}] m, \

@@ -10,6 +10,6 @@ pub mod thermal;
 
 pub use history::Visit;
 pub use motion::{MotionSample, PathPoint};
-pub use perturbation::{ErrorModel, Perturbation};
-pub use robot::{DeflectionSolver, TrueRobot, TrueState};
+pub use perturbation::{DeflectionSolver, ErrorModel, Perturbation};
+pub use robot::{TrueRobot, TrueState};
 pub use thermal::ThermalProfile;

@@ -1,13 +1,16 @@
 //! What makes the true robot differ from its nominal model, as magnitudes (from the scenario) and as one
 //! sampled draw (written to `campaign.json`, read by nothing but the evaluation).
+//!
+//! A new error source costs four edits, all here: its magnitude in [`ErrorModel`] (off by default, with its
+//! default in the serde attribute only), its check (a line in a table of [`ErrorModel::validate`]), its value
+//! in [`Perturbation`] and its draw in `Perturbation::draw` (after every earlier draw).
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::Rng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::robot::DeflectionSolver;
 use super::stiffness::SoftZone;
 use super::thermal::ThermalProfile;
 use crate::error::{Error, Result};
@@ -110,38 +113,45 @@ fn is_default_damping_ratio(v: &f64) -> bool {
     *v == DEFAULT_DAMPING_RATIO
 }
 
+/// How the static deflection is computed in a campaign.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum DeflectionSolver {
+    /// `q = q0 + K⁻¹ τ_g(q)` iterated to 1e-13 rad: microseconds per pose.
+    #[default]
+    FixedPoint,
+    /// The rapier3d multibody stepped to rest: milliseconds per pose, the physics reference.
+    Rapier,
+}
+
+/// The `[truth]` keys a scenario must give, each at zero. Every other key takes the default its serde attribute
+/// above gives it, so [`ErrorModel::stiff_only`] repeats no default.
+const REQUIRED_AT_ZERO: &str = "
+frame_translation_m = 0.0
+frame_rotation_rad = 0.0
+joint_zero_rad = 0.0
+base_translation_m = 0.0
+base_rotation_rad = 0.0
+stiffness_nm_per_rad = []
+";
+
 impl ErrorModel {
     /// A robot with joint stiffness `stiffness` and no other error: a base to set some errors on.
     pub fn stiff_only(stiffness: Vec<f64>) -> ErrorModel {
+        let none: ErrorModel = toml::from_str(REQUIRED_AT_ZERO)
+            .expect("REQUIRED_AT_ZERO is a complete [truth] section");
         ErrorModel {
-            frame_translation_m: 0.0,
-            frame_rotation_rad: 0.0,
-            joint_zero_rad: 0.0,
-            base_translation_m: 0.0,
-            base_rotation_rad: 0.0,
             stiffness_nm_per_rad: stiffness,
-            stiffness_spread: 0.0,
-            gear_orders: Vec::new(),
-            gear_amplitude_rad: 0.0,
-            repeatability_rad: 0.0,
-            deflection: DeflectionSolver::FixedPoint,
-            link_mass_spread: 0.0,
-            link_com_m: 0.0,
-            cable_kg_per_m: 0.0,
-            gear_ratio: Vec::new(),
-            gear_wave_amplitude_rad: 0.0,
-            hysteresis_rad: 0.0,
-            soft_zone_torque_nm: Vec::new(),
-            soft_zone_stiffness_ratio: unit_ratio(),
-            tilt_stiffness_nm_per_rad: Vec::new(),
-            thermal: None,
-            damping_ratio: DEFAULT_DAMPING_RATIO,
+            ..none
         }
     }
 
+    /// Checks the magnitudes against a robot with `dof` joints. Most sources need only a line in one of the
+    /// tables below (a magnitude, a relative scatter, a list with one value per joint); one with rules of its
+    /// own gets a step of its own.
     pub fn validate(&self, dof: usize) -> Result<()> {
         let bad = |m: String| Err(Error::Invalid(m));
-        let scalars = [
+        let magnitudes = [
             ("frame_translation_m", self.frame_translation_m),
             ("frame_rotation_rad", self.frame_rotation_rad),
             ("joint_zero_rad", self.joint_zero_rad),
@@ -156,12 +166,13 @@ impl ErrorModel {
             ("gear_wave_amplitude_rad", self.gear_wave_amplitude_rad),
             ("hysteresis_rad", self.hysteresis_rad),
         ];
-        for (name, v) in scalars {
-            if !(v.is_finite() && v >= 0.0) {
-                return bad(format!(
-                    "truth.{name} = {v} must be finite and non-negative"
-                ));
-            }
+        if let Some((name, v)) = magnitudes
+            .iter()
+            .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        {
+            return bad(format!(
+                "truth.{name} = {v} must be finite and non-negative"
+            ));
         }
         // Undamped joints would ring for ever after every move; above 2 the joints barely move back.
         if !(self.damping_ratio > 0.0 && self.damping_ratio <= 2.0) {
@@ -176,36 +187,41 @@ impl ErrorModel {
                 self.stiffness_nm_per_rad.len()
             ));
         }
-        if let Some(k) = self
-            .stiffness_nm_per_rad
-            .iter()
-            .find(|k| !(k.is_finite() && **k > 0.0))
-        {
+        each_positive("stiffness_nm_per_rad", &self.stiffness_nm_per_rad)?;
+        let scatters = [
+            ("stiffness_spread", self.stiffness_spread),
+            ("link_mass_spread", self.link_mass_spread),
+        ];
+        if let Some((name, _)) = scatters.iter().find(|(_, v)| *v >= 0.5) {
             return bad(format!(
-                "truth.stiffness_nm_per_rad has {k}; every stiffness must be positive"
+                "truth.{name} must be below 0.5 (a relative scatter)"
             ));
         }
-        if self.stiffness_spread >= 0.5 {
-            return bad("truth.stiffness_spread must be below 0.5 (a relative scatter)".into());
+        let per_joint = [
+            ("gear_ratio", self.gear_ratio.len()),
+            ("soft_zone_torque_nm", self.soft_zone_torque_nm.len()),
+            (
+                "tilt_stiffness_nm_per_rad",
+                self.tilt_stiffness_nm_per_rad.len(),
+            ),
+        ];
+        if let Some((name, len)) = per_joint.iter().find(|(_, len)| *len != 0 && *len != dof) {
+            return bad(format!(
+                "truth.{name} has {len} values, the robot has {dof} joints (or leave it out)"
+            ));
         }
-        if self.link_mass_spread >= 0.5 {
-            return bad("truth.link_mass_spread must be below 0.5 (a relative scatter)".into());
+        self.check_gear_wave()?;
+        self.check_soft_zone()?;
+        self.check_tilt()?;
+        if let Some(t) = &self.thermal {
+            t.validate()?;
         }
-        let per_joint = |name: &str, len: usize| {
-            if len != 0 && len != dof {
-                bad(format!(
-                    "truth.{name} has {len} values, the robot has {dof} joints (or leave it out)"
-                ))
-            } else {
-                Ok(())
-            }
-        };
-        per_joint("gear_ratio", self.gear_ratio.len())?;
-        per_joint("soft_zone_torque_nm", self.soft_zone_torque_nm.len())?;
-        per_joint(
-            "tilt_stiffness_nm_per_rad",
-            self.tilt_stiffness_nm_per_rad.len(),
-        )?;
+        Ok(())
+    }
+
+    /// The strain-wave harmonics need a ratio per joint, each at least 1.
+    fn check_gear_wave(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Invalid(m));
         if self.gear_wave_amplitude_rad > 0.0 && self.gear_ratio.is_empty() {
             return bad(
                 "truth.gear_wave_amplitude_rad needs truth.gear_ratio (one per joint)".into(),
@@ -214,6 +230,12 @@ impl ErrorModel {
         if self.gear_ratio.contains(&0) {
             return bad("truth.gear_ratio has 0; every ratio must be at least 1".into());
         }
+        Ok(())
+    }
+
+    /// The soft zone's torque limits and stiffness ratios must describe a stiffening torsion curve.
+    fn check_soft_zone(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Invalid(m));
         if let Some([t1, t2]) = self
             .soft_zone_torque_nm
             .iter()
@@ -229,15 +251,13 @@ impl ErrorModel {
                 "truth.soft_zone_stiffness_ratio = [{r1}, {r2}] must satisfy 0 < K1/K3 ≤ K2/K3 ≤ 1"
             ));
         }
-        if let Some(k) = self
-            .tilt_stiffness_nm_per_rad
-            .iter()
-            .find(|k| !(k.is_finite() && **k > 0.0))
-        {
-            return bad(format!(
-                "truth.tilt_stiffness_nm_per_rad has {k}; every stiffness must be positive"
-            ));
-        }
+        Ok(())
+    }
+
+    /// Tilt needs positive stiffness and the fixed-point solver (rapier's joints do not tilt).
+    fn check_tilt(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Invalid(m));
+        each_positive("tilt_stiffness_nm_per_rad", &self.tilt_stiffness_nm_per_rad)?;
         if !self.tilt_stiffness_nm_per_rad.is_empty() && self.deflection == DeflectionSolver::Rapier
         {
             return bad(
@@ -246,10 +266,17 @@ impl ErrorModel {
                     .into(),
             );
         }
-        if let Some(t) = &self.thermal {
-            t.validate()?;
-        }
         Ok(())
+    }
+}
+
+/// Every stiffness in `truth.{name}` must be a positive number.
+fn each_positive(name: &str, stiffness: &[f64]) -> Result<()> {
+    match stiffness.iter().find(|k| !(k.is_finite() && **k > 0.0)) {
+        Some(k) => Err(Error::Invalid(format!(
+            "truth.{name} has {k}; every stiffness must be positive"
+        ))),
+        None => Ok(()),
     }
 }
 
@@ -334,6 +361,20 @@ impl Perturbation {
     /// Draws every error from `model`; the order of draws is fixed so a seed always gives the same robot.
     pub fn sample(model: &ErrorModel, dof: usize, rng: &mut ChaCha8Rng) -> Result<Perturbation> {
         model.validate(dof)?;
+        Ok(Perturbation::draw(model, dof, rng))
+    }
+
+    /// A perturbation that changes nothing but the stiffness: the nominal geometry made compliant. It is the
+    /// draw of a model without any error magnitude, which never calls the generator.
+    pub fn rigid_geometry(stiffness: Vec<f64>) -> Perturbation {
+        let dof = stiffness.len();
+        let model = ErrorModel::stiff_only(stiffness);
+        Perturbation::draw(&model, dof, &mut ChaCha8Rng::seed_from_u64(0))
+    }
+
+    /// The draw of a checked `model`: each source's value from its magnitude. A source that draws nothing may
+    /// go anywhere; one that draws goes after every earlier draw, so a scenario without it draws the same robot.
+    fn draw(model: &ErrorModel, dof: usize, rng: &mut ChaCha8Rng) -> Perturbation {
         let base = Offset::sample(rng, model.base_translation_m, model.base_rotation_rad);
         let joint_frames = (0..dof)
             .map(|_| Offset::sample(rng, model.frame_translation_m, model.frame_rotation_rad))
@@ -341,59 +382,41 @@ impl Perturbation {
         let joint_zero = (0..dof)
             .map(|_| normal(rng, model.joint_zero_rad))
             .collect();
-        let stiffness = model
+        let stiffness: Vec<f64> = model
             .stiffness_nm_per_rad
             .iter()
             .map(|k| k * (1.0 + normal(rng, model.stiffness_spread)).max(0.5))
             .collect();
-        let gear = (0..dof)
-            .map(|_| {
-                model
-                    .gear_orders
-                    .iter()
-                    .map(|&order| GearHarmonic {
-                        order,
-                        amplitude: model.gear_amplitude_rad,
-                        phase: rng.random_range(0.0..std::f64::consts::TAU),
-                    })
-                    .collect()
-            })
+        let mut gear: Vec<Vec<GearHarmonic>> = (0..dof)
+            .map(|_| harmonics(&model.gear_orders, model.gear_amplitude_rad, rng))
             .collect();
-        let mut p = Perturbation {
-            base,
-            joint_frames,
-            joint_zero,
-            stiffness,
-            gear,
-            repeatability_rad: model.repeatability_rad,
-            ..Perturbation::rigid_geometry(Vec::new())
-        };
         // Drawn after everything above, so a scenario without these errors draws the same robot as before.
-        if model.link_mass_spread > 0.0 || model.link_com_m > 0.0 {
-            for _ in 0..dof {
-                p.link_mass_factor
-                    .push((1.0 + normal(rng, model.link_mass_spread)).max(0.5));
+        let (link_mass_factor, link_com_offset) =
+            if model.link_mass_spread > 0.0 || model.link_com_m > 0.0 {
                 let c = model.link_com_m;
-                p.link_com_offset
-                    .push([normal(rng, c), normal(rng, c), normal(rng, c)]);
-            }
-        }
+                (0..dof)
+                    .map(|_| {
+                        let mass = (1.0 + normal(rng, model.link_mass_spread)).max(0.5);
+                        (mass, [normal(rng, c), normal(rng, c), normal(rng, c)])
+                    })
+                    .unzip()
+            } else {
+                (Vec::new(), Vec::new())
+            };
         if model.gear_wave_amplitude_rad > 0.0 {
-            for (gear, &ratio) in p.gear.iter_mut().zip(&model.gear_ratio) {
-                for order in [ratio, 2 * ratio] {
-                    gear.push(GearHarmonic {
-                        order,
-                        amplitude: model.gear_wave_amplitude_rad,
-                        phase: rng.random_range(0.0..std::f64::consts::TAU),
-                    });
-                }
+            for (gear, &ratio) in gear.iter_mut().zip(&model.gear_ratio) {
+                gear.extend(harmonics(
+                    &[ratio, 2 * ratio],
+                    model.gear_wave_amplitude_rad,
+                    rng,
+                ));
             }
         }
         let [r1, r2] = model.soft_zone_stiffness_ratio;
-        p.soft_zone = model
+        let soft_zone = model
             .soft_zone_torque_nm
             .iter()
-            .zip(&p.stiffness)
+            .zip(&stiffness)
             .map(|(&[t1, t2], &k3)| SoftZone {
                 t1,
                 t2,
@@ -402,32 +425,21 @@ impl Perturbation {
                 k3,
             })
             .collect();
-        p.cable_kg_per_m = model.cable_kg_per_m;
-        p.hysteresis_rad = model.hysteresis_rad;
-        p.tilt_stiffness = model.tilt_stiffness_nm_per_rad.clone();
-        p.thermal = model.thermal.clone();
-        p.damping_ratio = model.damping_ratio;
-        Ok(p)
-    }
-
-    /// A perturbation that changes nothing but the stiffness: the nominal geometry made compliant.
-    pub fn rigid_geometry(stiffness: Vec<f64>) -> Perturbation {
-        let dof = stiffness.len();
         Perturbation {
-            base: Offset::ZERO,
-            joint_frames: vec![Offset::ZERO; dof],
-            joint_zero: vec![0.0; dof],
+            base,
+            joint_frames,
+            joint_zero,
             stiffness,
-            gear: vec![Vec::new(); dof],
-            repeatability_rad: 0.0,
-            link_mass_factor: Vec::new(),
-            link_com_offset: Vec::new(),
-            cable_kg_per_m: 0.0,
-            hysteresis_rad: 0.0,
-            soft_zone: Vec::new(),
-            tilt_stiffness: Vec::new(),
-            thermal: None,
-            damping_ratio: DEFAULT_DAMPING_RATIO,
+            gear,
+            repeatability_rad: model.repeatability_rad,
+            link_mass_factor,
+            link_com_offset,
+            cable_kg_per_m: model.cable_kg_per_m,
+            hysteresis_rad: model.hysteresis_rad,
+            soft_zone,
+            tilt_stiffness: model.tilt_stiffness_nm_per_rad.clone(),
+            thermal: model.thermal.clone(),
+            damping_ratio: model.damping_ratio,
         }
     }
 
@@ -441,10 +453,78 @@ impl Perturbation {
     }
 }
 
+/// One harmonic of amplitude `amplitude` per order, each with a uniform phase (one draw per order, in order).
+fn harmonics(orders: &[u32], amplitude: f64, rng: &mut ChaCha8Rng) -> Vec<GearHarmonic> {
+    orders
+        .iter()
+        .map(|&order| GearHarmonic {
+            order,
+            amplitude,
+            phase: rng.random_range(0.0..std::f64::consts::TAU),
+        })
+        .collect()
+}
+
 fn normal(rng: &mut ChaCha8Rng, sigma: f64) -> f64 {
     if sigma == 0.0 {
         return 0.0;
     }
     // sigma was validated finite and non-negative, so the distribution always exists.
     Normal::new(0.0, sigma).map_or(0.0, |d| d.sample(rng))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stiff_only_takes_every_default_from_the_serde_attributes() {
+        let m = ErrorModel::stiff_only(vec![1e5; 2]);
+        assert_eq!(m.stiffness_nm_per_rad, vec![1e5; 2]);
+        assert_eq!(m.deflection, DeflectionSolver::FixedPoint);
+        assert_eq!(m.soft_zone_stiffness_ratio, [1.0, 1.0]);
+        assert_eq!(m.damping_ratio, DEFAULT_DAMPING_RATIO);
+        assert_eq!(m.thermal, None);
+        assert!(m.gear_orders.is_empty() && m.gear_ratio.is_empty());
+        assert!(m.soft_zone_torque_nm.is_empty() && m.tilt_stiffness_nm_per_rad.is_empty());
+        let magnitudes = [
+            m.frame_translation_m,
+            m.frame_rotation_rad,
+            m.joint_zero_rad,
+            m.base_translation_m,
+            m.base_rotation_rad,
+            m.stiffness_spread,
+            m.gear_amplitude_rad,
+            m.repeatability_rad,
+            m.link_mass_spread,
+            m.link_com_m,
+            m.cable_kg_per_m,
+            m.gear_wave_amplitude_rad,
+            m.hysteresis_rad,
+        ];
+        assert!(magnitudes.iter().all(|&v| v == 0.0));
+        m.validate(2).unwrap();
+    }
+
+    #[test]
+    fn rigid_geometry_changes_nothing_but_the_stiffness() {
+        let p = Perturbation::rigid_geometry(vec![2e4, 3e4]);
+        let expected = Perturbation {
+            base: Offset::ZERO,
+            joint_frames: vec![Offset::ZERO; 2],
+            joint_zero: vec![0.0; 2],
+            stiffness: vec![2e4, 3e4],
+            gear: vec![Vec::new(); 2],
+            repeatability_rad: 0.0,
+            link_mass_factor: Vec::new(),
+            link_com_offset: Vec::new(),
+            cable_kg_per_m: 0.0,
+            hysteresis_rad: 0.0,
+            soft_zone: Vec::new(),
+            tilt_stiffness: Vec::new(),
+            thermal: None,
+            damping_ratio: DEFAULT_DAMPING_RATIO,
+        };
+        assert_eq!(p, expected);
+    }
 }

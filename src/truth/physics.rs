@@ -122,184 +122,61 @@ impl PhysicsReference {
         gravity: [f64; 3],
         opts: SettleOptions,
     ) -> Result<Self> {
-        if joint_names.is_empty() {
-            return Err(Error::Invalid("physics reference: no joints given".into()));
-        }
-        if stiffness.len() != joint_names.len() {
-            return Err(Error::Invalid(format!(
-                "physics reference: {} stiffness values for {} joints",
-                stiffness.len(),
-                joint_names.len()
-            )));
-        }
-        for (name, &k) in joint_names.iter().zip(stiffness) {
-            if !(k.is_finite() && k > 0.0) {
-                return Err(Error::Invalid(format!(
-                    "physics reference: stiffness of joint `{name}` is {k}, must be finite and > 0"
-                )));
-            }
-        }
-        if gravity.iter().any(|g| !g.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "physics reference: gravity {gravity:?} is not finite"
-            )));
-        }
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        let options_ok = positive(opts.dt)
-            && positive(opts.tol_rad)
-            && opts.damping.is_finite()
-            && opts.damping >= 0.0
-            && opts.max_steps > 0;
-        if !options_ok {
-            return Err(Error::Invalid(format!(
-                "physics reference: bad settle options {opts:?}"
-            )));
-        }
-        let mut seen = HashMap::new();
-        for (i, name) in joint_names.iter().enumerate() {
-            if seen.insert(name.as_str(), i).is_some() {
-                return Err(Error::Invalid(format!(
-                    "physics reference: joint `{name}` listed twice"
-                )));
-            }
-        }
-
-        let loader = UrdfLoaderOptions {
-            create_colliders_from_collision_shapes: false,
-            create_colliders_from_visual_shapes: false,
-            apply_imported_mass_props: true,
-            make_roots_fixed: true,
-            rigid_body_blueprint: RigidBodyBuilder::dynamic().can_sleep(false),
-            ..UrdfLoaderOptions::default()
-        };
-        // `from_str` can panic inside urdf-rs/the loader on odd input; keep the promise of
-        // never panicking.
-        let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            UrdfRobot::from_str(urdf_xml, loader, Path::new("."))
-        }))
-        .map_err(|_| urdf_err("the URDF loader panicked on this input"))?;
-        let (mut robot, urdf) = parsed.map_err(|e| urdf_err(format!("{e:#}")))?;
-
-        // Which UrdfRobot joint carries each caller joint. After squeezing empty fixed links a
-        // moving joint may live on a representative joint: its source index names the URDF joint
-        // it took its type and axis from.
-        let mut slot_of_robot_joint: Vec<Option<usize>> = vec![None; robot.joints.len()];
-        let mut found = vec![false; joint_names.len()];
-        for (rj, joint) in robot.joints.iter_mut().enumerate() {
-            let src = &urdf.joints[joint.source_urdf_joint_index()];
-            let movable = !matches!(src.joint_type, urdf_rs::JointType::Fixed);
-            match seen.get(src.name.as_str()) {
-                Some(&slot) => {
-                    if !matches!(
-                        src.joint_type,
-                        urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous
-                    ) {
-                        return Err(urdf_err(format!(
-                            "joint `{}` is {:?}; only revolute/continuous joints can be springs",
-                            src.name, src.joint_type
-                        )));
-                    }
-                    slot_of_robot_joint[rj] = Some(slot);
-                    found[slot] = true;
-                    // The sag reference ignores joint limits.
-                    joint.joint.limit_axes = JointAxesMask::empty();
-                }
-                None if movable => {
-                    return Err(urdf_err(format!(
-                        "movable joint `{}` is not in the joint list {joint_names:?}",
-                        src.name
-                    )));
-                }
-                None => {}
-            }
-        }
-        if let Some(missing) = found.iter().position(|f| !f) {
-            let movable: Vec<&str> = urdf
-                .joints
-                .iter()
-                .filter(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed))
-                .map(|j| j.name.as_str())
-                .collect();
-            return Err(urdf_err(format!(
-                "joint `{}` is not a movable joint of the URDF (movable joints: {movable:?})",
-                joint_names[missing]
-            )));
-        }
-
-        let mut world = PhysicsWorld {
-            gravity: Vector::new(gravity[0] as Real, gravity[1] as Real, gravity[2] as Real),
-            ..PhysicsWorld::default()
-        };
-        world.integration_parameters.dt = opts.dt as Real;
-        let handles = robot.insert_using_multibody_joints(
-            &mut world.bodies,
-            &mut world.colliders,
-            &mut world.multibody_joints,
-            UrdfMultibodyOptions::DISABLE_SELF_CONTACTS,
-        );
-
-        let mut slot_handle: Vec<Option<MultibodyJointHandle>> = vec![None; joint_names.len()];
-        for (rj, jh) in handles.joints.iter().enumerate() {
-            if let Some(slot) = slot_of_robot_joint[rj] {
-                let h = jh.joint.ok_or_else(|| {
-                    Error::Physics(format!(
-                        "joint `{}` could not be inserted as a multibody joint (kinematic loop?)",
-                        joint_names[slot]
-                    ))
-                })?;
-                slot_handle[slot] = Some(h);
-            }
-        }
-        let joints: Vec<JointSlot> = joint_names
-            .iter()
-            .zip(stiffness)
-            .zip(slot_handle)
-            .map(|((name, &k), h)| {
-                h.map(|handle| JointSlot {
-                    name: name.clone(),
-                    handle,
-                    stiffness: k,
-                })
-                .ok_or_else(|| Error::Physics(format!("joint `{name}` has no multibody joint")))
-            })
-            .collect::<Result<_>>()?;
-
-        // All joints must sit in one multibody; make its root fixed in its coordinates now
-        // (until the first forward kinematics the fixed root counts as 6 free DoFs).
+        let slot_of_name = check_inputs(joint_names, stiffness, gravity, &opts)?;
+        let (mut robot, urdf) = load_urdf(urdf_xml)?;
+        let slot_of_robot_joint = match_joints(&mut robot, &urdf, &slot_of_name, joint_names)?;
+        let (world, robot_joint_handles) = insert_robot(robot, gravity, opts.dt);
+        let joints = joint_slots(
+            &robot_joint_handles,
+            &slot_of_robot_joint,
+            joint_names,
+            stiffness,
+        )?;
         let mut reference = Self {
             world,
             joints,
             opts,
             soft_zones: Vec::new(),
         };
-        {
-            let first = reference.joints[0].handle;
-            let (mb, _) = reference
-                .world
-                .multibody_joints
-                .get_mut(first)
-                .ok_or_else(|| Error::Physics("multibody of the first joint is gone".into()))?;
-            mb.forward_kinematics(&reference.world.bodies, true);
-            mb.update_rigid_bodies(&mut reference.world.bodies, true);
-            let ndofs = mb.ndofs();
-            if ndofs != joint_names.len() {
-                return Err(Error::Physics(format!(
-                    "the arm's multibody has {ndofs} DoFs, expected {} (one per listed joint; is the \
-                     root fixed?)",
-                    joint_names.len()
-                )));
-            }
+        reference.fix_root()?;
+        reference.check_one_tree()?;
+        Ok(reference)
+    }
+
+    /// All joints must sit in one multibody; make its root fixed in its coordinates now
+    /// (until the first forward kinematics the fixed root counts as 6 free DoFs).
+    fn fix_root(&mut self) -> Result<()> {
+        let first = self.joints[0].handle;
+        let (mb, _) = self
+            .world
+            .multibody_joints
+            .get_mut(first)
+            .ok_or_else(|| Error::Physics("multibody of the first joint is gone".into()))?;
+        mb.forward_kinematics(&self.world.bodies, true);
+        mb.update_rigid_bodies(&mut self.world.bodies, true);
+        let ndofs = mb.ndofs();
+        if ndofs != self.joints.len() {
+            return Err(Error::Physics(format!(
+                "the arm's multibody has {ndofs} DoFs, expected {} (one per listed joint; is the \
+                 root fixed?)",
+                self.joints.len()
+            )));
         }
-        let first_mb = reference.multibody_of(0)?;
-        for i in 1..reference.joints.len() {
-            if reference.multibody_of(i)? != first_mb {
+        Ok(())
+    }
+
+    /// Every listed joint must be in the first joint's multibody.
+    fn check_one_tree(&self) -> Result<()> {
+        let first_mb = self.multibody_of(0)?;
+        for i in 1..self.joints.len() {
+            if self.multibody_of(i)? != first_mb {
                 return Err(urdf_err(format!(
                     "joint `{}` is not in the same kinematic tree as `{}`",
-                    reference.joints[i].name, reference.joints[0].name
+                    self.joints[i].name, self.joints[0].name
                 )));
             }
         }
-        Ok(reference)
+        Ok(())
     }
 
     /// The movable joints, in the caller's order.
@@ -493,6 +370,188 @@ impl PhysicsReference {
             self.opts.max_steps, self.opts.dt, self.opts.tol_rad
         )))
     }
+}
+
+/// Checks the caller's joints, stiffness, gravity and options; returns each joint name's slot (its index in
+/// `joint_names`).
+fn check_inputs<'a>(
+    joint_names: &'a [String],
+    stiffness: &[f64],
+    gravity: [f64; 3],
+    opts: &SettleOptions,
+) -> Result<HashMap<&'a str, usize>> {
+    if joint_names.is_empty() {
+        return Err(Error::Invalid("physics reference: no joints given".into()));
+    }
+    if stiffness.len() != joint_names.len() {
+        return Err(Error::Invalid(format!(
+            "physics reference: {} stiffness values for {} joints",
+            stiffness.len(),
+            joint_names.len()
+        )));
+    }
+    for (name, &k) in joint_names.iter().zip(stiffness) {
+        if !(k.is_finite() && k > 0.0) {
+            return Err(Error::Invalid(format!(
+                "physics reference: stiffness of joint `{name}` is {k}, must be finite and > 0"
+            )));
+        }
+    }
+    if gravity.iter().any(|g| !g.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "physics reference: gravity {gravity:?} is not finite"
+        )));
+    }
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    let options_ok = positive(opts.dt)
+        && positive(opts.tol_rad)
+        && opts.damping.is_finite()
+        && opts.damping >= 0.0
+        && opts.max_steps > 0;
+    if !options_ok {
+        return Err(Error::Invalid(format!(
+            "physics reference: bad settle options {opts:?}"
+        )));
+    }
+    let mut seen = HashMap::new();
+    for (i, name) in joint_names.iter().enumerate() {
+        if seen.insert(name.as_str(), i).is_some() {
+            return Err(Error::Invalid(format!(
+                "physics reference: joint `{name}` listed twice"
+            )));
+        }
+    }
+    Ok(seen)
+}
+
+/// The rapier robot of the URDF text (dynamic bodies that never sleep, the URDF's inertials, no colliders, the
+/// root fixed) and the parsed URDF.
+fn load_urdf(urdf_xml: &str) -> Result<(UrdfRobot, urdf_rs::Robot)> {
+    let loader = UrdfLoaderOptions {
+        create_colliders_from_collision_shapes: false,
+        create_colliders_from_visual_shapes: false,
+        apply_imported_mass_props: true,
+        make_roots_fixed: true,
+        rigid_body_blueprint: RigidBodyBuilder::dynamic().can_sleep(false),
+        ..UrdfLoaderOptions::default()
+    };
+    // `from_str` can panic inside urdf-rs/the loader on odd input; keep the promise of
+    // never panicking.
+    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        UrdfRobot::from_str(urdf_xml, loader, Path::new("."))
+    }))
+    .map_err(|_| urdf_err("the URDF loader panicked on this input"))?;
+    parsed.map_err(|e| urdf_err(format!("{e:#}")))
+}
+
+/// Which UrdfRobot joint carries each caller joint (its slot; `None`: a fixed joint). After squeezing empty
+/// fixed links a moving joint may live on a representative joint: its source index names the URDF joint it
+/// took its type and axis from. Removes the limits of the caller's joints.
+fn match_joints(
+    robot: &mut UrdfRobot,
+    urdf: &urdf_rs::Robot,
+    slot_of_name: &HashMap<&str, usize>,
+    joint_names: &[String],
+) -> Result<Vec<Option<usize>>> {
+    let mut slot_of_robot_joint: Vec<Option<usize>> = vec![None; robot.joints.len()];
+    let mut found = vec![false; joint_names.len()];
+    for (rj, joint) in robot.joints.iter_mut().enumerate() {
+        let src = &urdf.joints[joint.source_urdf_joint_index()];
+        let movable = !matches!(src.joint_type, urdf_rs::JointType::Fixed);
+        match slot_of_name.get(src.name.as_str()) {
+            Some(&slot) => {
+                if !matches!(
+                    src.joint_type,
+                    urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous
+                ) {
+                    return Err(urdf_err(format!(
+                        "joint `{}` is {:?}; only revolute/continuous joints can be springs",
+                        src.name, src.joint_type
+                    )));
+                }
+                slot_of_robot_joint[rj] = Some(slot);
+                found[slot] = true;
+                // The sag reference ignores joint limits.
+                joint.joint.limit_axes = JointAxesMask::empty();
+            }
+            None if movable => {
+                return Err(urdf_err(format!(
+                    "movable joint `{}` is not in the joint list {joint_names:?}",
+                    src.name
+                )));
+            }
+            None => {}
+        }
+    }
+    if let Some(missing) = found.iter().position(|f| !f) {
+        let movable: Vec<&str> = urdf
+            .joints
+            .iter()
+            .filter(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed))
+            .map(|j| j.name.as_str())
+            .collect();
+        return Err(urdf_err(format!(
+            "joint `{}` is not a movable joint of the URDF (movable joints: {movable:?})",
+            joint_names[missing]
+        )));
+    }
+    Ok(slot_of_robot_joint)
+}
+
+/// A world under `gravity`, stepped by `dt`, holding the robot as multibody joints without self contacts;
+/// with the multibody joint of each robot joint (`None`: not inserted as one).
+fn insert_robot(
+    robot: UrdfRobot,
+    gravity: [f64; 3],
+    dt: f64,
+) -> (PhysicsWorld, Vec<Option<MultibodyJointHandle>>) {
+    let mut world = PhysicsWorld {
+        gravity: Vector::new(gravity[0] as Real, gravity[1] as Real, gravity[2] as Real),
+        ..PhysicsWorld::default()
+    };
+    world.integration_parameters.dt = dt as Real;
+    let handles = robot.insert_using_multibody_joints(
+        &mut world.bodies,
+        &mut world.colliders,
+        &mut world.multibody_joints,
+        UrdfMultibodyOptions::DISABLE_SELF_CONTACTS,
+    );
+    let joints = handles.joints.iter().map(|jh| jh.joint).collect();
+    (world, joints)
+}
+
+/// The caller's joints in their order, each with its multibody joint and stiffness.
+fn joint_slots(
+    robot_joint_handles: &[Option<MultibodyJointHandle>],
+    slot_of_robot_joint: &[Option<usize>],
+    joint_names: &[String],
+    stiffness: &[f64],
+) -> Result<Vec<JointSlot>> {
+    let mut slot_handle: Vec<Option<MultibodyJointHandle>> = vec![None; joint_names.len()];
+    for (rj, handle) in robot_joint_handles.iter().enumerate() {
+        if let Some(slot) = slot_of_robot_joint[rj] {
+            let h = handle.ok_or_else(|| {
+                Error::Physics(format!(
+                    "joint `{}` could not be inserted as a multibody joint (kinematic loop?)",
+                    joint_names[slot]
+                ))
+            })?;
+            slot_handle[slot] = Some(h);
+        }
+    }
+    joint_names
+        .iter()
+        .zip(stiffness)
+        .zip(slot_handle)
+        .map(|((name, &k), h)| {
+            h.map(|handle| JointSlot {
+                name: name.clone(),
+                handle,
+                stiffness: k,
+            })
+            .ok_or_else(|| Error::Physics(format!("joint `{name}` has no multibody joint")))
+        })
+        .collect()
 }
 
 #[cfg(test)]

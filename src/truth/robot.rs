@@ -12,7 +12,6 @@
 use nalgebra::{Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use serde::{Deserialize, Serialize};
 
 use super::history::{Visit, approach};
 use super::perturbation::Perturbation;
@@ -22,17 +21,6 @@ use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
 use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
 use crate::robot::kinematics::forward_kinematics;
 use crate::robot::{Chain, Frames, Inertial, Payload};
-
-/// How the static deflection is computed in a campaign.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "kebab-case")]
-pub enum DeflectionSolver {
-    /// `q = q0 + K⁻¹ τ_g(q)` iterated to 1e-13 rad: microseconds per pose.
-    #[default]
-    FixedPoint,
-    /// The rapier3d multibody stepped to rest: milliseconds per pose, the physics reference.
-    Rapier,
-}
 
 #[derive(Clone, Debug)]
 pub struct TrueRobot {
