@@ -6,11 +6,12 @@
 //! - `error`, `output`, `rng`, `numeric` (decompositions that refuse non-finite input): serve every stage;
 //! - `robot` (the nominal chain: URDF, DH form, kinematics, IK, collisions) → `truth` (the true robot) →
 //!   `tracker` (instrument and reflectors) → `world` (the simulated world built once: nominal and true robot,
-//!   tracker, mounting, seed) → `campaign` (regions, layouts, feasibility, the simulated measurement) →
-//!   `dataset` (the measurement file format a method reads) → `measurements` (a campaign written in it) →
-//!   `calib` (registration and the calibration methods) → `design` (observability and model-based point
-//!   choice, which a campaign's `d-optimal` layout is handed as its selector) → `eval` (judging fitted
-//!   methods against the truth) → `study` (sweeps) → `report` (files a person reads);
+//!   tracker, mounting, seed) → `dataset` (the measurement file format a method reads) → `calib`
+//!   (registration and the calibration methods; the list of methods is what a campaign designed for one, a
+//!   study and a report name) → `campaign` (regions, layouts, feasibility, the simulated measurement) →
+//!   `measurements` (a campaign written in the dataset format) → `design` (observability and model-based point
+//!   choice, which a campaign's `d-optimal` layout is handed as its selector) → `eval` (judging fitted methods
+//!   against the truth) → `study` (sweeps) → `report` (files a person reads);
 //! - `scenario` reads and checks the TOML file whose sections are the stages' own configurations, and
 //!   `app` builds the world from it and runs the job each binary asks for. No stage imports either.
 
@@ -23,10 +24,10 @@ pub mod robot;
 pub mod truth;
 pub mod tracker;
 pub mod world;
-pub mod campaign;
 pub mod dataset;
-pub mod measurements;
 pub mod calib;
+pub mod campaign;
+pub mod measurements;
 pub mod design;
 pub mod eval;
 pub mod study;

@@ -9,7 +9,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::calib::registry::MethodKind;
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
 use crate::eval::EvaluationConfig;
@@ -183,7 +182,6 @@ impl Scenario {
             .map_err(|m| format!("reflectors: {m}"))?;
         self.campaign
             .validate()
-            .and_then(|()| selection_model(&self.campaign.selection.model))
             .map_err(|m| format!("campaign: {m}"))?;
         if self.campaign.trajectory.is_some() && (self.evaluation.is_some() || self.study.is_some())
         {
@@ -227,18 +225,6 @@ impl Scenario {
         }
         Ok(chain)
     }
-}
-
-/// A model-based layout's `selection.model` must name a method with robot parameters to determine.
-fn selection_model(name: &str) -> std::result::Result<(), String> {
-    let kind = MethodKind::parse(name).map_err(|e| format!("selection.model: {}", e.detail()))?;
-    if !kind.info().has_robot_parameters() {
-        return Err(format!(
-            "selection.model = '{name}' has no robot parameters to determine; use kinematic, elastic or a \
-             paper model"
-        ));
-    }
-    Ok(())
 }
 
 /// The table a line of `before`'s end belongs to, as a key prefix (`study.`, `regions.`); empty at the top.

@@ -212,7 +212,7 @@ closed_loop_points = 5
 fn space_filling_spreads_the_points_over_the_pool_and_each_method_has_its_design() {
     use calibench::calib::registry::MethodKind;
     use calibench::campaign::Selector;
-    use calibench::design::layout::{Design, SpaceFilling};
+    use calibench::design::layout::{PointDesign, SpaceFilling};
     // A 1-D pool 0..=10: the centre first, then the two ends.
     let line: Vec<Vec<f64>> = (0..=10).map(|i| vec![i as f64]).collect();
     let pool: Vec<&[f64]> = line.iter().map(Vec::as_slice).collect();
@@ -225,15 +225,18 @@ fn space_filling_spreads_the_points_over_the_pool_and_each_method_has_its_design
     assert_eq!(SpaceFilling.choose(&pool, 5).unwrap(), [0, 4, 12, 20, 24]);
     assert!(SpaceFilling.choose(&pool, 26).is_err());
 
-    let design = |m: &str| Design::of(MethodKind::parse(m).unwrap());
+    let design = |m: &str| PointDesign::of(MethodKind::parse(m).unwrap());
     let kinematic = MethodKind::parse("kinematic").unwrap();
     let elastic = MethodKind::parse("elastic").unwrap();
-    assert_eq!(design("kinematic"), Design::Parameters(kinematic));
-    assert_eq!(design("hybrid-kinematic"), Design::Parameters(kinematic));
-    assert_eq!(design("elastic"), Design::Parameters(elastic));
-    assert_eq!(design("hybrid"), Design::Parameters(elastic));
+    assert_eq!(design("kinematic"), PointDesign::Parameters(kinematic));
+    assert_eq!(
+        design("hybrid-kinematic"),
+        PointDesign::Parameters(kinematic)
+    );
+    assert_eq!(design("elastic"), PointDesign::Parameters(elastic));
+    assert_eq!(design("hybrid"), PointDesign::Parameters(elastic));
     for m in ["nominal", "paper-rotz", "paper-rotxyz", "residual-ridge"] {
-        assert_eq!(design(m), Design::SpaceFilling, "{m}");
+        assert_eq!(design(m), PointDesign::SpaceFilling, "{m}");
     }
 }
 

@@ -10,7 +10,7 @@ use calibench::report::recording::{self, arrow_factor};
 use calibench::robot::{Chain, flange_pose, urdf};
 use calibench::scenario::Scenario;
 use calibench::study::{
-    BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
+    Detail, DetailPoint, GridPoint, Histogram, RunKey, RunMetrics, StudyConfig, StudyResult,
 };
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rerun::StoreKind;
@@ -119,7 +119,7 @@ fn study(chain: &Chain) -> StudyResult {
         .map(|m| {
             (
                 kind(m),
-                BeforeAfter {
+                Histogram {
                     before: points.iter().map(|p| p.error_before.norm()).collect(),
                     after: points.iter().map(|p| p.error_after.norm()).collect(),
                 },

@@ -13,7 +13,7 @@ use calibench::report::metrics::metrics_csv;
 use calibench::report::plots::{histograms_png, learning_curves_png};
 use calibench::report::summary::summary_md;
 use calibench::scenario::Scenario;
-use calibench::study::{BeforeAfter, Detail, RunKey, RunMetrics, StudyConfig, StudyResult};
+use calibench::study::{Detail, Histogram, RunKey, RunMetrics, StudyConfig, StudyResult};
 use nalgebra::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -135,7 +135,7 @@ pub fn study(orientation: bool) -> StudyResult {
             .collect();
         histograms.insert(
             MethodKind::parse(m).unwrap(),
-            BeforeAfter {
+            Histogram {
                 before: before.clone(),
                 after,
             },

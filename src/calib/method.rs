@@ -36,13 +36,13 @@ pub struct MethodInfo {
     pub takes_inputs: bool,
     /// A hybrid's base method: the one whose prediction it corrects.
     pub base: Option<&'static MethodInfo>,
-    /// The model a campaign for this method is designed for.
-    pub design: Design,
+    /// The parameters of the robot it identifies: what a campaign for it is designed to determine.
+    pub parameters: RobotParameters,
 }
 
-/// The model a method's points are designed for ([`crate::design`]).
+/// The parameters of the robot a method identifies, the model its points are designed for ([`crate::design`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Design {
+pub enum RobotParameters {
     /// No parameters of the robot to determine.
     None,
     /// The error parameters of one of the paper's error models.
@@ -53,7 +53,7 @@ pub enum Design {
 
 impl fmt::Display for MethodInfo {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name)
+        f.pad(self.name)
     }
 }
 
@@ -67,7 +67,7 @@ impl Serialize for MethodInfo {
 impl MethodInfo {
     /// Whether it identifies parameters of the robot: those its points can be designed to determine.
     pub fn has_robot_parameters(&self) -> bool {
-        self.design != Design::None
+        self.parameters != RobotParameters::None
     }
 
     /// Reads a method's name from a file, as one of `methods` (those a model type can be).

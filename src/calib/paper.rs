@@ -19,7 +19,7 @@ use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
     select_params,
 };
-use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
+use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
@@ -43,7 +43,7 @@ pub const NOMINAL: MethodInfo = MethodInfo {
     summary: "the nominal model on the registered tracker frame and mounting (the paper's \"Measured\")",
     takes_inputs: false,
     base: None,
-    design: Design::None,
+    parameters: RobotParameters::None,
 };
 
 pub const PAPER_ROTZ: MethodInfo = paper_method("paper-rotz", ErrorModelKind::RotZ);
@@ -58,7 +58,7 @@ const fn paper_method(name: &'static str, kind: ErrorModelKind) -> MethodInfo {
         summary: "the paper's error parameters, each a ridge regression on the configuration (and extra inputs)",
         takes_inputs: true,
         base: None,
-        design: Design::ErrorModel(kind),
+        parameters: RobotParameters::ErrorModel(kind),
     }
 }
 

@@ -101,7 +101,7 @@ impl MethodKind {
 
 impl fmt::Display for MethodKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 
@@ -364,6 +364,9 @@ mod tests {
         for (i, kind) in MethodKind::ALL.into_iter().enumerate() {
             assert_eq!(MethodKind::parse(kind.name()).unwrap(), kind);
             assert_eq!(MethodKind::of(kind.info()), Some(kind));
+            // Tables align a method's name in a column.
+            assert_eq!(format!("{kind:<25}|").find('|'), Some(25));
+            assert_eq!(format!("{:<25}|", kind.info()).find('|'), Some(25));
             assert!(
                 MethodKind::ALL[..i].iter().all(|m| m.name() != kind.name()),
                 "{kind} twice"

@@ -29,7 +29,7 @@ pub use super::correction::{ComponentModel, ResidualCorrection};
 use super::correction::{Reference, mean};
 use super::domain::Domain;
 use super::kinematic::{ELASTIC, KINEMATIC};
-use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
+use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::rigid::centre;
 use super::tracker_frame::{
     Observation, Registration, fit_mounting, fit_tracker_frame, probe_rotation,
@@ -44,7 +44,7 @@ pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
     summary: "the nominal prediction plus ridge models of its residual on the joint angles (and extra inputs)",
     takes_inputs: true,
     base: None,
-    design: Design::None,
+    parameters: RobotParameters::None,
 };
 
 pub const HYBRID: MethodInfo = hybrid("hybrid", &ELASTIC);
@@ -57,7 +57,7 @@ pub const HYBRID_ON_OTHER_BASE: MethodInfo = MethodInfo {
     summary: "a base method's prediction plus ridge models of its residual",
     takes_inputs: true,
     base: None,
-    design: Design::None,
+    parameters: RobotParameters::None,
 };
 
 /// The hybrid on `base`: its residual is data-driven, its parameters and design model are the base's.
@@ -67,7 +67,7 @@ const fn hybrid(name: &'static str, base: &'static MethodInfo) -> MethodInfo {
         summary: "a base method's prediction plus ridge models of its residual",
         takes_inputs: true,
         base: Some(base),
-        design: base.design,
+        parameters: base.parameters,
     }
 }
 

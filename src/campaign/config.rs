@@ -4,6 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::calib::registry::{CLASSICAL, MethodKind};
 use crate::robot::collision::Obstacle;
 
 /// The largest candidate pool of a model-based layout, on the same grounds as a region's point cap
@@ -86,7 +87,7 @@ impl CampaignConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct SelectionConfig {
     /// The method whose parameters the points must determine (`kinematic`, `elastic`, or a paper model).
-    pub model: String,
+    pub model: MethodKind,
     pub pool_factor: f64,
     pub pool_min: usize,
     pub pool_max: usize,
@@ -101,7 +102,7 @@ pub struct SelectionConfig {
 impl Default for SelectionConfig {
     fn default() -> Self {
         SelectionConfig {
-            model: "kinematic".into(),
+            model: CLASSICAL,
             pool_factor: 20.0,
             pool_min: 2000,
             pool_max: 4000,
@@ -119,8 +120,7 @@ impl SelectionConfig {
             .max(n)
     }
 
-    /// Checks the pool; whether `model` names a method with robot parameters is for whoever knows the
-    /// methods to say (the scenario, when it is read).
+    /// Checks the model (a method with robot parameters to determine) and the pool.
     pub fn validate(&self) -> std::result::Result<(), String> {
         if !(self.pool_factor.is_finite() && self.pool_factor >= 1.0) {
             return Err(format!(
@@ -150,6 +150,13 @@ impl SelectionConfig {
             return Err(format!(
                 "selection.posture_spread_deg = {} must be finite and non-negative",
                 self.posture_spread_deg
+            ));
+        }
+        if !self.model.info().has_robot_parameters() {
+            return Err(format!(
+                "selection.model = '{}' has no robot parameters to determine; use kinematic, elastic or a \
+                 paper model",
+                self.model
             ));
         }
         Ok(())

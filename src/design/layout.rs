@@ -39,8 +39,8 @@ impl<'a> DOptimal<'a> {
         ctx: &FitContext<'a>,
         reflectors: &[Point3<f64>],
     ) -> Result<DOptimal<'a>> {
-        let model = DesignModel::for_method(MethodKind::parse(&selection.model)?, ctx, reflectors)?
-            .ok_or_else(|| {
+        let model =
+            DesignModel::for_method(selection.model, ctx, reflectors)?.ok_or_else(|| {
                 Error::Invalid(format!(
                     "campaign.selection.model = '{}' has no parameters to design for",
                     selection.model
@@ -139,23 +139,21 @@ impl Selector for SpaceFilling {
 /// the constant-parameter models (`kinematic`, `elastic` and the hybrids on them), space-filling in the joint
 /// angles for the methods that regress on them (the paper's models, `residual-ridge`) and for `nominal`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Design {
+pub enum PointDesign {
     /// D-optimal for the parameters of this method (a hybrid's base).
     Parameters(MethodKind),
     SpaceFilling,
 }
 
-impl Design {
-    pub fn of(kind: MethodKind) -> Design {
-        use crate::calib::method::Design as Model;
+impl PointDesign {
+    pub fn of(kind: MethodKind) -> PointDesign {
+        use crate::calib::method::RobotParameters as Model;
         let info = kind.info();
-        match info.design {
-            Model::Identification { .. } => Design::Parameters(
-                info.base
-                    .and_then(|b| MethodKind::parse(b.name).ok())
-                    .unwrap_or(kind),
-            ),
-            Model::ErrorModel(_) | Model::None => Design::SpaceFilling,
+        match info.parameters {
+            Model::Identification { .. } => {
+                PointDesign::Parameters(info.base.and_then(MethodKind::of).unwrap_or(kind))
+            }
+            Model::ErrorModel(_) | Model::None => PointDesign::SpaceFilling,
         }
     }
 
@@ -167,10 +165,10 @@ impl Design {
         selection: &SelectionConfig,
     ) -> Result<Box<dyn Selector + 'a>> {
         match self {
-            Design::SpaceFilling => Ok(Box::new(SpaceFilling)),
-            Design::Parameters(kind) => {
+            PointDesign::SpaceFilling => Ok(Box::new(SpaceFilling)),
+            PointDesign::Parameters(kind) => {
                 let selection = SelectionConfig {
-                    model: kind.info().name.to_string(),
+                    model: kind,
                     ..selection.clone()
                 };
                 Ok(Box::new(DOptimal::for_selection(
@@ -183,10 +181,10 @@ impl Design {
     /// In words, for the summary.
     pub fn describe(self) -> String {
         match self {
-            Design::Parameters(kind) => {
+            PointDesign::Parameters(kind) => {
                 format!("D-optimal for `{}`'s own parameters", kind.info().name)
             }
-            Design::SpaceFilling => "space-filling in the joint angles".into(),
+            PointDesign::SpaceFilling => "space-filling in the joint angles".into(),
         }
     }
 }

@@ -22,7 +22,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::calib::error_model::{ErrorModelKind, ErrorParam, error_jacobian, select_params};
 use crate::calib::kinematic::Identification;
-use crate::calib::method::{Design, FitContext};
+use crate::calib::method::{FitContext, RobotParameters};
 use crate::calib::registry::MethodKind;
 use crate::calib::rigid::centre;
 use crate::error::{Error, Result};
@@ -91,16 +91,18 @@ impl<'a> DesignModel<'a> {
             }
         };
         let info = method.info();
-        let basis = match info.design {
-            Design::None => return Ok(None),
-            Design::ErrorModel(kind) => paper(kind),
-            Design::Identification { elastic } => {
+        let basis = match info.parameters {
+            RobotParameters::None => return Ok(None),
+            RobotParameters::ErrorModel(kind) => paper(kind),
+            RobotParameters::Identification { elastic } => {
                 Basis::Kinematic(Box::new(Identification::new(elastic, ctx, mount, length)?))
             }
         };
         // A hybrid's parameters are its base's.
         let method = match info.base {
-            Some(base) => MethodKind::parse(base.name)?,
+            Some(base) => MethodKind::of(base).ok_or_else(|| {
+                Error::Invalid(format!("{method}: its base {base} is not a listed method"))
+            })?,
             None => method,
         };
         let names = match &basis {

@@ -10,7 +10,7 @@
 use nalgebra::{Point3, UnitQuaternion};
 use serde_json::json;
 
-use crate::calib::method::{Basis, Design, Fitted, MethodInfo, Prediction};
+use crate::calib::method::{Basis, Fitted, MethodInfo, Prediction, RobotParameters};
 use crate::calib::rigid::{centre, register_points};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
@@ -105,7 +105,7 @@ pub const ORACLE: MethodInfo = MethodInfo {
     summary: "the true robot, noise-free: the measurement-noise floor",
     takes_inputs: false,
     base: None,
-    design: Design::None,
+    parameters: RobotParameters::None,
 };
 
 impl Fitted for Oracle {

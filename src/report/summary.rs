@@ -276,7 +276,7 @@ fn verdict(
 /// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
 /// largest size both have, and the reason its design implies.
 fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
-    use crate::design::layout::Design;
+    use crate::design::layout::PointDesign;
     let Some(designed) = curves.iter().find(|c| c.distribution.selects()) else {
         return String::new();
     };
@@ -299,27 +299,27 @@ fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
     let Some((n, mine, other, geometric)) = best else {
         return String::new();
     };
-    let design = Design::of(kind);
+    let design = PointDesign::of(kind);
     let ratio = mine / other;
     let (verb, why) = match (design, ratio) {
         (_, r) if (0.95..=1.05).contains(&r) => (
             "makes little difference to it",
             "the layout matters little for this model at this size",
         ),
-        (Design::Parameters(_), r) if r < 1.0 => (
+        (PointDesign::Parameters(_), r) if r < 1.0 => (
             "helps it",
             "points chosen to determine its own parameters pay when its model describes the robot",
         ),
-        (Design::Parameters(_), _) => (
+        (PointDesign::Parameters(_), _) => (
             "hurts it",
             "D-optimal points sit at the extremes of the joint space, where the errors its model lacks are \
              largest, so the fit is biased for the rest of the region (D-optimality assumes the model is right)",
         ),
-        (Design::SpaceFilling, r) if r < 1.0 => (
+        (PointDesign::SpaceFilling, r) if r < 1.0 => (
             "helps it",
             "it fits a function of the joint angles, and space-filling points cover those inputs evenly",
         ),
-        (Design::SpaceFilling, _) => (
+        (PointDesign::SpaceFilling, _) => (
             "hurts it",
             "it fits a function of the joint angles, and maximin points favour the edges of the pool's joint \
              space, so the configurations the region's targets mostly need are sampled more thinly than by \

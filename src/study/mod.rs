@@ -67,9 +67,10 @@ pub struct RunMetrics {
     pub fit_ms: f64,
 }
 
-/// Per-point errors of one view, for histograms (m).
+/// The data of one method's before/after histogram: its per-point test-split errors (m) and the nominal
+/// model's on the same points.
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-pub struct BeforeAfter {
+pub struct Histogram {
     pub before: Vec<f64>,
     pub after: Vec<f64>,
 }
@@ -108,7 +109,7 @@ pub struct Detail {
     /// The region's ground-truth grid with the detail method's residuals.
     pub grid: Vec<GridPoint>,
     /// Test-split errors before (nominal) and after, per method, at the largest size (first layout and seed).
-    pub histograms: BTreeMap<MethodKind, BeforeAfter>,
+    pub histograms: BTreeMap<MethodKind, Histogram>,
     /// The tracker's true pose (world ← tracker), for drawing it and its beams.
     pub tracker: Isometry3<f64>,
 }

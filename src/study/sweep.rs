@@ -26,13 +26,13 @@ pub use super::progress::Progress;
 use super::progress::{Counter, run_weight};
 use super::shard::{Shard, StudyPart, assemble};
 use super::{
-    BeforeAfter, Detail, DetailPoint, GridPoint, RunKey, RunMetrics, StudyConfig, StudyResult,
+    Detail, DetailPoint, GridPoint, Histogram, RunKey, RunMetrics, StudyConfig, StudyResult,
 };
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{MethodKind, REFERENCE};
 use crate::campaign::{Campaign, CampaignConfig, DistributionKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
-use crate::design::layout::Design;
+use crate::design::layout::PointDesign;
 use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::GroundTruth;
@@ -209,10 +209,10 @@ fn selectors<'a>(
     world: &'a World,
     campaign: &'a CampaignConfig,
 ) -> Result<(Selectors<'a>, Vec<usize>)> {
-    let mut layouts: Vec<Design> = Vec::new();
+    let mut layouts: Vec<PointDesign> = Vec::new();
     let mut design_of = Vec::with_capacity(config.methods.len());
     for &kind in &config.methods {
-        let design = Design::of(kind);
+        let design = PointDesign::of(kind);
         design_of.push(
             layouts
                 .iter()
@@ -630,7 +630,7 @@ impl Shared<'_> {
                 let data = o.points.as_ref()?;
                 Some((
                     self.kinds[m],
-                    BeforeAfter {
+                    Histogram {
                         before: before_test.clone(),
                         after: data.test.clone(),
                     },

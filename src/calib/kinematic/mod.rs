@@ -73,7 +73,7 @@ pub use solve::Termination;
 
 use super::domain::Domain;
 use super::error_model::{ErrorFrames, FrameErrors};
-use super::method::{Basis, Design, FitContext, Fitted, Method, MethodInfo, Prediction};
+use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -104,7 +104,7 @@ pub const KINEMATIC: MethodInfo = MethodInfo {
     summary: "classical calibration: constant DH-frame errors, tracker frame and mounting by Levenberg–Marquardt",
     takes_inputs: false,
     base: None,
-    design: Design::Identification { elastic: false },
+    parameters: RobotParameters::Identification { elastic: false },
 };
 
 pub const ELASTIC: MethodInfo = MethodInfo {
@@ -112,7 +112,7 @@ pub const ELASTIC: MethodInfo = MethodInfo {
     summary: "kinematic calibration plus one joint compliance per joint under the nominal gravity torques",
     takes_inputs: false,
     base: None,
-    design: Design::Identification { elastic: true },
+    parameters: RobotParameters::Identification { elastic: true },
 };
 
 /// `kinematic`, and `elastic` with the joint compliances: one fitting.
