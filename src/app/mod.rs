@@ -28,6 +28,35 @@ use crate::world::World;
 /// few enough that starting them cannot exhaust the system (100 000 threads hung it).
 pub const MAX_THREADS: usize = 256;
 
+/// Sets the worker count: `flag` (`--threads`), else `SLURM_CPUS_PER_TASK` (what a Slurm job was given), else
+/// every core.
+pub fn set_threads(flag: Option<usize>) -> Result<()> {
+    let n = match flag {
+        Some(n) => Some((n, "--threads".to_string())),
+        None => match std::env::var("SLURM_CPUS_PER_TASK") {
+            Ok(v) => Some((
+                v.trim().parse().map_err(|_| {
+                    Error::Invalid(format!("SLURM_CPUS_PER_TASK='{v}' is not a thread count"))
+                })?,
+                "SLURM_CPUS_PER_TASK".to_string(),
+            )),
+            Err(_) => None,
+        },
+    };
+    if let Some((n, from)) = n {
+        if !(1..=MAX_THREADS).contains(&n) {
+            return Err(Error::Invalid(format!(
+                "{from} {n}: between 1 and {MAX_THREADS}"
+            )));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?;
+    }
+    Ok(())
+}
+
 /// The command line as `T`, or the process ends: with help or version printed (exit 0), or with one
 /// `error:` line (exit 1, as every other refusal of the tools; clap alone would print its usage and exit 2).
 pub fn parse_args<T: clap::Parser>() -> T {
