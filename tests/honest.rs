@@ -127,7 +127,8 @@ fn a_calibration_worse_than_nominal_is_flagged() {
     // The same summary with the two means swapped is what a worse calibration reports.
     let mut worse = good.report.test.clone();
     std::mem::swap(&mut worse.before, &mut worse.after);
-    let warnings = calibench::app::calibrate::worse_than_nominal(&worse, "on the test split");
+    let warnings =
+        calibench::app::calibration_report::worse_than_nominal(&worse, "on the test split");
     assert_eq!(warnings.len(), 1, "{warnings:?}");
     assert!(warnings[0].contains("WORSE") && warnings[0].contains("on the test split"));
     // Through the binary: an arm that is exactly its nominal model (the measurements are the nominal

@@ -1,31 +1,34 @@
-//! The `calibrate` jobs: [`fit`] a method on measured data and judge it on a test split or another campaign
-//! (`report.json`, `model.json`, `predictions.csv`, the paper's Tables 1 and 2), and [`apply`] a saved model
-//! to new joint configurations (predicted poses and corrected commands).
+//! The `calibrate` job: [`fit`] a method on measured data and judge it on a test split or another campaign
+//! (`report.json`, `model.json`, `predictions.csv`, the paper's Tables 1 and 2), in steps that each return
+//! what the next needs: read, fit, judge, report, write, tables. Applying a saved model is [`super::apply`].
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::calib::clock::{self, ClockOffset};
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
-use crate::calib::registry::{MethodKind, REFERENCE, Save, SavedModel};
+use crate::calib::registry::{MethodKind, REFERENCE, Save};
 use crate::calib::regression::RegressionOptions;
-use crate::calib::tracker_frame::Registration;
+use crate::calib::tracker_frame::Observation;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
-use crate::dataset::{self, Dataset, Split, TruthTable};
+use crate::dataset::{Dataset, Split, TruthTable};
 use crate::error::{Error, Result};
-use crate::eval::split::SplitRule;
+use crate::eval::split::{Parts, SplitRule};
 use crate::eval::tables::{BeforeAfter, BeforeAfterSummary};
 use crate::eval::transfer::{self, TestRegistration};
 use crate::output;
-use crate::robot::Payload;
 use crate::robot::dh::DhChain;
+use crate::robot::{Chain, Payload};
 
+use super::calibration_report::{
+    CalibrationReport, ClockReport, RegistrationReport, TestRegistrationReport, worse_than_nominal,
+};
 use super::test_points;
 
 /// What to fit and where to test it (the flags of `calibrate`).
@@ -58,93 +61,22 @@ pub struct FitOptions {
     pub regression: RegressionOptions,
 }
 
-/// `report.json`.
-///
-/// Written through [`serde_json::Value`], whose maps keep their keys sorted (serde_json without
-/// `preserve_order`): the file's keys are in alphabetical order at every level, as they always were, and
-/// the method's own facts sit among the common fields.
-#[derive(Clone, Debug, Serialize)]
-pub struct CalibrationReport {
-    pub method: String,
-    pub data: String,
-    pub robot: String,
-    pub n_train: usize,
-    pub n_val: usize,
-    pub n_test: usize,
-    pub fit_ms: f64,
-    /// The model's registration of the training data.
-    pub registration: RegistrationReport,
-    pub test: BeforeAfterSummary,
-    /// The test campaign, with `--test-data`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub test_data: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub test_registration: Option<TestRegistrationReport>,
-    /// With `--test-registration refit`: the same test campaign through the model's own registration (nothing
-    /// fitted on the test points), beside `test`, which a refit on few points flatters.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub test_model_registration: Option<BeforeAfterSummary>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub extra_inputs: Option<Vec<String>>,
-    /// The method's own facts (kept parameters, R², rank, …) at the top level beside the common ones; a fact
-    /// named like a field above replaces it.
-    #[serde(flatten)]
-    pub method_facts: Map<String, Value>,
-    /// Against the ground truth, with `--truth`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub truth: Option<BeforeAfterSummary>,
-    /// Whether the calibrated model's test mean (position, or orientation where measured) is above the
-    /// nominal model's: a calibration that makes the arm worse.
-    pub worse_than_nominal: bool,
-    /// What the user must know before trusting the result, one sentence each (also printed as `warning:`).
-    pub warnings: Vec<String>,
-    /// Test points outside the model's training domain (`test_points.csv`).
-    pub test_outside_domain: usize,
-    /// For data measured on the fly (a `time` column): the clock offset removed before fitting (controller minus
-    /// tracker, s) and the nominal registration's RMS at it and at zero (mm).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub clock_offset: Option<ClockReport>,
-}
+const BAD_PAYLOAD: &str =
+    "--payload-kg must be finite and non-negative, --payload-com-m three numbers x,y,z";
 
-/// The clock offset `calibrate` removed.
-#[derive(Clone, Debug, Serialize)]
-pub struct ClockReport {
-    pub offset_s: f64,
-    pub rms_mm: f64,
-    pub rms_at_zero_mm: f64,
+/// The payload of `--payload-kg` and `--payload-com-m`, checked before any file is read.
+pub fn payload(mass_kg: f64, com_m: &[f64]) -> Result<Payload> {
+    match (com_m, mass_kg) {
+        ([x, y, z], mass) if mass.is_finite() && mass >= 0.0 => Ok(Payload {
+            mass,
+            com: [*x, *y, *z],
+        }),
+        _ => Err(Error::Invalid(BAD_PAYLOAD.into())),
+    }
 }
 
 /// The clock offset is searched within ±this (s): far beyond a synchronised controller's and tracker's.
 pub const CLOCK_BOUND_S: f64 = 0.05;
-
-/// A registration as `report.json` shows it.
-#[derive(Clone, Debug, Serialize)]
-pub struct RegistrationReport {
-    pub tracker_to_base: Isometry3<f64>,
-    pub mounting_m: Point3<f64>,
-    pub probe_rotation: Option<UnitQuaternion<f64>>,
-    pub rms_mm: f64,
-}
-
-impl RegistrationReport {
-    pub fn of(r: &Registration) -> RegistrationReport {
-        RegistrationReport {
-            tracker_to_base: r.frame.tracker_to_base,
-            mounting_m: r.frame.mounting,
-            probe_rotation: r.probe_rotation,
-            rms_mm: r.frame.rms * 1e3,
-        }
-    }
-}
-
-/// How the test campaign was registered, with `--test-data`.
-#[derive(Clone, Debug, Serialize)]
-pub struct TestRegistrationReport {
-    pub mode: TestRegistration,
-    pub fitted_on_test_data: String,
-    #[serde(flatten)]
-    pub registration: RegistrationReport,
-}
 
 /// What [`fit`] did, for the binary to print.
 #[derive(Clone, Debug)]
@@ -154,6 +86,19 @@ pub struct FitOutcome {
     pub tables: String,
     /// Where the files went.
     pub out: PathBuf,
+}
+
+impl FitOutcome {
+    /// What `calibrate` prints: the tables, then what was fitted and where the files went (the report's
+    /// warnings go to stderr apart).
+    pub fn text(&self) -> String {
+        let (r, out) = (&self.report, self.out.display());
+        let (train, val, ms) = (r.n_train, r.n_val, r.fit_ms);
+        let tables = &self.tables;
+        format!(
+            "{tables}fit on {train} training + {val} validation points in {ms:.1} ms; wrote {out}\n"
+        )
+    }
 }
 
 /// A refitted test registration is trusted with at least this many test points per refitted parameter:
@@ -173,6 +118,53 @@ const FIT_OUTPUTS: [&str; 4] = [
 /// all or none.
 pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     output::check_dir(&options.out, &FIT_OUTPUTS)?;
+    let inputs = read(options)?;
+    let pair = fit_pair(options, &inputs)?;
+    let judged = judge(options, &inputs, &pair)?;
+    let points = test_points(&inputs, &pair, &judged)?;
+    let report = report(options, &inputs, &pair, &judged, points.outside);
+    write(options, &inputs, &pair, &report, points.csv)?;
+    let tables = tables(&inputs, &pair, &report, &judged)?;
+    Ok(FitOutcome {
+        report,
+        tables,
+        out: options.out.clone(),
+    })
+}
+
+/// What [`fit`] reads: the robot, the data (synchronised), the test campaign or split, the truth.
+struct Inputs {
+    chain: Chain,
+    dh: DhChain,
+    data: Dataset,
+    /// The clock offset removed from data measured on the fly.
+    clock_offset: Option<ClockOffset>,
+    /// With `--test-data`: the test campaign, read and synchronised as `data`.
+    test_file: Option<Dataset>,
+    /// The truth of `data`, aligned to its points.
+    truth: Option<TruthTable>,
+    parts: Parts,
+}
+
+impl Inputs {
+    /// Where the model is judged: the test campaign, else the test split.
+    fn test(&self) -> &Dataset {
+        self.test_file.as_ref().unwrap_or(&self.parts.test)
+    }
+
+    fn ctx(&self, options: &FitOptions) -> FitContext<'_> {
+        FitContext {
+            chain: &self.chain,
+            dh: &self.dh,
+            payload: options.payload,
+            regression: options.regression.clone(),
+        }
+    }
+}
+
+/// Reads the robot, the data and the test campaign (each checked against the joint ranges and synchronised),
+/// the truth, and splits the data.
+fn read(options: &FitOptions) -> Result<Inputs> {
     let chain = crate::robot::load(&options.robot, options.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
     let mapping = options
@@ -234,22 +226,44 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     if parts.test_indices.is_empty() && test_file.is_none() {
         return Err(Error::Invalid("the test split is empty".into()));
     }
-    let (train, val) = (&parts.train, &parts.val);
-    let test = test_file.as_ref().unwrap_or(&parts.test);
+    Ok(Inputs {
+        chain,
+        dh,
+        data,
+        clock_offset,
+        test_file,
+        truth,
+        parts,
+    })
+}
 
+/// The method's model, and the nominal model that measures "before" unless the method is the nominal one.
+struct FittedPair {
+    model: Box<dyn Fitted>,
+    nominal: Option<Box<dyn Fitted>>,
+    fit_ms: f64,
+}
+
+impl FittedPair {
+    fn model(&self) -> &dyn Fitted {
+        self.model.as_ref()
+    }
+
+    fn nominal(&self) -> &dyn Fitted {
+        self.nominal.as_deref().unwrap_or(self.model())
+    }
+}
+
+/// Fits the method on the training and validation parts, timed, then the nominal model.
+fn fit_pair(options: &FitOptions, inputs: &Inputs) -> Result<FittedPair> {
+    let (train, val) = (&inputs.parts.train, &inputs.parts.val);
     let started = Instant::now();
-    let ctx = FitContext {
-        chain: &chain,
-        dh: &dh,
-        payload: options.payload,
-        regression: options.regression.clone(),
-    };
+    let ctx = inputs.ctx(options);
     let fitting = format!("fitting {}", options.method.info());
     let model = options
         .method
         .fit(&ctx, train, val)
-        .map_err(|e| e.in_data(&data.origin, &fitting))?;
-    let model = model.as_ref();
+        .map_err(|e| e.in_data(&inputs.data.origin, &fitting))?;
     let fit_ms = started.elapsed().as_secs_f64() * 1e3;
 
     // "Measured" (before) is one number per data set: the nominal kinematics under the nominal model's own
@@ -259,78 +273,183 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     } else {
         Some(REFERENCE.fit(&ctx, train, val)?)
     };
-    let nominal_model = nominal.as_deref().unwrap_or(model);
-    let (mut refitted, mut kept) = (0usize, None);
-    let (obs_test, test_errors, test_registration) = match &test_file {
-        None => {
-            let obs = model
-                .registration()
-                .observe(test)
-                .map_err(|e| e.in_data(&data.origin, "the test split"))?;
-            let mut e = BeforeAfter::of(model, &obs);
-            if nominal.is_some() {
-                let nominal_obs = nominal_model
-                    .registration()
-                    .observe(test)
-                    .map_err(|e| e.in_data(&data.origin, "the test split"))?;
-                e = e.measured_by(&BeforeAfter::of(nominal_model, &nominal_obs));
-            }
-            (obs, e, None)
-        }
-        Some(t) => {
-            let mode = options.test_registration;
-            let after = transfer::evaluate(model, t, mode)
-                .map_err(|e| e.in_data(&t.origin, "registering the test campaign"))?;
-            // "Before": the nominal kinematics, registered on the test campaign the same way.
-            let before = transfer::evaluate(nominal_model, t, mode)?;
-            let obs = after.registration.observe(t)?;
-            refitted = after.refitted_parameters();
-            if mode == TestRegistration::Refit {
-                // The model's registration on the same points: nothing fitted on them. It may not apply (a
-                // campaign measured from another station); then only the refit is reported.
-                kept = transfer::evaluate(model, t, TestRegistration::Model)
-                    .and_then(|a| {
-                        let b = transfer::evaluate(nominal_model, t, TestRegistration::Model)?;
-                        BeforeAfter::transferred(&b, &a).summary()
-                    })
-                    .ok();
-            }
-            let described = TestRegistrationReport {
-                mode,
-                fitted_on_test_data: after.describe(),
-                registration: RegistrationReport::of(&after.registration),
-            };
-            (
-                obs,
-                BeforeAfter::transferred(&before, &after),
-                Some(described),
-            )
-        }
+    Ok(FittedPair {
+        model,
+        nominal,
+        fit_ms,
+    })
+}
+
+/// The model judged on the test points, and against the truth when given.
+struct Judged {
+    /// The test points under the model's registration (the method reports its own facts on them).
+    observed: Vec<Observation>,
+    errors: BeforeAfter,
+    summary: BeforeAfterSummary,
+    /// With `--test-data`: how the test campaign was registered.
+    registration: Option<TestRegistrationReport>,
+    /// The parameters the test registration fitted on the test points.
+    refitted: usize,
+    /// With `--test-registration refit`: the test points through the model's own registration.
+    kept: Option<BeforeAfterSummary>,
+    truth: Option<(BeforeAfter, BeforeAfterSummary)>,
+}
+
+fn judge(options: &FitOptions, inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
+    let mut judged = match &inputs.test_file {
+        None => judge_split(inputs, pair)?,
+        Some(t) => judge_campaign(options, t, pair)?,
     };
-    let registration = model.registration();
+    judged.truth = judge_truth(inputs, pair)?;
+    Ok(judged)
+}
+
+/// On the test split, each model under its own registration.
+fn judge_split(inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
+    let (model, test, origin) = (pair.model(), inputs.test(), &inputs.data.origin);
+    let observed = model
+        .registration()
+        .observe(test)
+        .map_err(|e| e.in_data(origin, "the test split"))?;
+    let mut errors = BeforeAfter::of(model, &observed);
+    if pair.nominal.is_some() {
+        let nominal_obs = pair
+            .nominal()
+            .registration()
+            .observe(test)
+            .map_err(|e| e.in_data(origin, "the test split"))?;
+        errors = errors.measured_by(&BeforeAfter::of(pair.nominal(), &nominal_obs));
+    }
+    Ok(Judged {
+        observed,
+        summary: errors.summary()?,
+        errors,
+        registration: None,
+        refitted: 0,
+        kept: None,
+        truth: None,
+    })
+}
+
+/// On another campaign, registered as `--test-registration` says.
+fn judge_campaign(options: &FitOptions, t: &Dataset, pair: &FittedPair) -> Result<Judged> {
+    let (model, nominal_model) = (pair.model(), pair.nominal());
+    let mode = options.test_registration;
+    let after = transfer::evaluate(model, t, mode)
+        .map_err(|e| e.in_data(&t.origin, "registering the test campaign"))?;
+    // "Before": the nominal kinematics, registered on the test campaign the same way.
+    let before = transfer::evaluate(nominal_model, t, mode)?;
+    let observed = after.registration.observe(t)?;
+    let mut kept = None;
+    if mode == TestRegistration::Refit {
+        // The model's registration on the same points: nothing fitted on them. It may not apply (a
+        // campaign measured from another station); then only the refit is reported.
+        kept = transfer::evaluate(model, t, TestRegistration::Model)
+            .and_then(|a| {
+                let b = transfer::evaluate(nominal_model, t, TestRegistration::Model)?;
+                BeforeAfter::transferred(&b, &a).summary()
+            })
+            .ok();
+    }
+    let described = TestRegistrationReport {
+        mode,
+        fitted_on_test_data: after.describe(),
+        registration: RegistrationReport::of(&after.registration),
+    };
+    let errors = BeforeAfter::transferred(&before, &after);
+    Ok(Judged {
+        observed,
+        summary: errors.summary()?,
+        errors,
+        registration: Some(described),
+        refitted: after.refitted_parameters(),
+        kept,
+        truth: None,
+    })
+}
+
+/// Against the true positions of the test split's points, with `--truth`.
+fn judge_truth(
+    inputs: &Inputs,
+    pair: &FittedPair,
+) -> Result<Option<(BeforeAfter, BeforeAfterSummary)>> {
+    let Some(t) = &inputs.truth else {
+        return Ok(None);
+    };
+    let (model, test) = (pair.model(), inputs.test());
+    let t_test = t.subset(&inputs.parts.test_indices);
+    let mut obs_truth = model
+        .registration()
+        .observe_points(&test.q, &t_test.in_tracker)?;
+    // Each point with its own inputs (its temperature, its motion), as the measured test split has them.
+    for (i, o) in obs_truth.iter_mut().enumerate() {
+        o.inputs = test.extra_inputs_of(i).to_vec();
+    }
+    let mut e = BeforeAfter::of(model, &obs_truth);
+    if pair.nominal.is_some() {
+        let nominal_truth = pair
+            .nominal()
+            .registration()
+            .observe_points(&test.q, &t_test.in_tracker)?;
+        e = e.measured_by(&BeforeAfter::of(pair.nominal(), &nominal_truth));
+    }
+    let summary = e.summary()?;
+    Ok(Some((e, summary)))
+}
+
+/// `test_points.csv`, and how many test points lie outside the model's training domain.
+struct TestPoints {
+    csv: Vec<u8>,
+    outside: usize,
+}
+
+/// Per test point: inside the model's training domain or not (outside, its regression is left out).
+fn test_points(inputs: &Inputs, pair: &FittedPair, judged: &Judged) -> Result<TestPoints> {
+    let test = inputs.test();
+    let placements: Vec<_> = (0..test.len())
+        .map(|i| test_points::place(pair.model(), &test.q[i], test.extra_inputs_of(i)))
+        .collect();
+    let (csv, outside) = test_points::test_points_csv(
+        &test.point_ids,
+        &placements,
+        &judged.errors.before,
+        &judged.errors.after,
+    )?;
+    Ok(TestPoints { csv, outside })
+}
+
+/// `report.json`'s content, with the warnings the user must read.
+fn report(
+    options: &FitOptions,
+    inputs: &Inputs,
+    pair: &FittedPair,
+    judged: &Judged,
+    outside: usize,
+) -> CalibrationReport {
+    let (model, test) = (pair.model(), inputs.test());
     let mut report = CalibrationReport {
         method: model.method().to_string(),
         data: options.data.display().to_string(),
         robot: options.robot.display().to_string(),
-        n_train: train.len(),
-        n_val: val.len(),
+        n_train: inputs.parts.train.len(),
+        n_val: inputs.parts.val.len(),
         n_test: test.len(),
-        fit_ms,
-        registration: RegistrationReport::of(registration),
-        test: test_errors.summary()?,
-        test_data: test_registration.as_ref().map(|_| test.origin.clone()),
-        test_registration,
-        test_model_registration: kept,
+        fit_ms: pair.fit_ms,
+        registration: RegistrationReport::of(model.registration()),
+        test: judged.summary.clone(),
+        test_data: judged.registration.as_ref().map(|_| test.origin.clone()),
+        test_registration: judged.registration.clone(),
+        test_model_registration: judged.kept.clone(),
         extra_inputs: Some(model.input_names().to_vec()).filter(|n| !n.is_empty()),
-        method_facts: match model.report(&obs_test) {
+        method_facts: match model.report(&judged.observed) {
             Value::Object(facts) => facts,
             _ => Map::new(),
         },
-        truth: None,
+        truth: judged.truth.as_ref().map(|(_, s)| s.clone()),
         worse_than_nominal: false,
         warnings: Vec::new(),
-        test_outside_domain: 0,
-        clock_offset: clock_offset.map(|c| ClockReport {
+        test_outside_domain: outside,
+        clock_offset: inputs.clock_offset.as_ref().map(|c| ClockReport {
             offset_s: c.offset_s,
             rms_mm: c.rms_m * 1e3,
             rms_at_zero_mm: c.rms_at_zero_m * 1e3,
@@ -340,6 +459,7 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
         .warnings
         .extend(worse_than_nominal(&report.test, &what_test(&report)));
     report.worse_than_nominal = !report.warnings.is_empty();
+    let refitted = judged.refitted;
     if refitted > 0 && test.len() < MIN_POINTS_PER_REFITTED_PARAMETER * refitted {
         let kept = match &report.test_model_registration {
             Some(k) => format!(
@@ -356,38 +476,6 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             test.len()
         ));
     }
-    let truth_errors = match &truth {
-        Some(t) => {
-            let t_test = t.subset(&parts.test_indices);
-            let mut obs_truth = registration.observe_points(&test.q, &t_test.in_tracker)?;
-            // Each point with its own inputs (its temperature, its motion), as the measured test split has them.
-            for (i, o) in obs_truth.iter_mut().enumerate() {
-                o.inputs = test.extra_inputs_of(i).to_vec();
-            }
-            let mut e = BeforeAfter::of(model, &obs_truth);
-            if nominal.is_some() {
-                let nominal_truth = nominal_model
-                    .registration()
-                    .observe_points(&test.q, &t_test.in_tracker)?;
-                e = e.measured_by(&BeforeAfter::of(nominal_model, &nominal_truth));
-            }
-            report.truth = Some(e.summary()?);
-            Some(e)
-        }
-        None => None,
-    };
-
-    // Per test point: inside the model's training domain or not (outside, its regression is left out).
-    let placements: Vec<_> = (0..test.len())
-        .map(|i| test_points::place(model, &test.q[i], test.extra_inputs_of(i)))
-        .collect();
-    let (test_points_file, outside) = test_points::test_points_csv(
-        &test.point_ids,
-        &placements,
-        &test_errors.before,
-        &test_errors.after,
-    )?;
-    report.test_outside_domain = outside;
     if outside > 0 {
         report.warnings.push(format!(
             "{outside} of {} test points lie outside the model's training domain (joint or input ranges, or \
@@ -396,27 +484,50 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             test.len()
         ));
     }
-    let predictions = predictions_csv(model, &data, &parts.labels)?;
+    report
+}
+
+/// Writes the fit's files, all or none.
+fn write(
+    options: &FitOptions,
+    inputs: &Inputs,
+    pair: &FittedPair,
+    report: &CalibrationReport,
+    test_points_file: Vec<u8>,
+) -> Result<()> {
+    let model = pair.model();
+    let predictions = predictions_csv(model, &inputs.data, &inputs.parts.labels)?;
     output::write_dir(
         &options.out,
         &[
-            ("report.json", to_json(&to_value(&report)?)?),
+            ("report.json", to_json(&to_value(report)?)?),
             ("model.json", to_json(&model.save()?)?),
             ("predictions.csv", predictions),
             ("test_points.csv", test_points_file),
         ],
         &[],
-    )?;
+    )
+}
 
+/// Tables 1 and 2 on the test points, what the clock and the model's own registration did, and the tables
+/// against the truth.
+fn tables(
+    inputs: &Inputs,
+    pair: &FittedPair,
+    report: &CalibrationReport,
+    judged: &Judged,
+) -> Result<String> {
+    let method = pair.model().method();
     let what = match &report.test_registration {
         Some(r) => format!(
             "on {}; fitted on it: {}",
-            test.origin, r.fitted_on_test_data
+            inputs.test().origin,
+            r.fitted_on_test_data
         ),
         None => "on the test split".to_string(),
     };
-    let mut tables = test_errors.tables(
-        model.method(),
+    let mut tables = judged.errors.tables(
+        method,
         &format!("Table 1. Positional errors {what}"),
         &format!("Table 2. Orientational errors {what}"),
     )?;
@@ -436,18 +547,14 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
             k.before.mean_mm, k.after.mean_mm, report.test.after.mean_mm
         );
     }
-    if let Some(t) = truth_errors {
+    if let Some((t, _)) = &judged.truth {
         tables += &t.tables(
-            model.method(),
+            method,
             "Against the truth: positional errors on the test split",
             "Against the truth: orientational errors on the test split",
         )?;
     }
-    Ok(FitOutcome {
-        report,
-        tables,
-        out: options.out.clone(),
-    })
+    Ok(tables)
 }
 
 /// What the test set is, for a warning.
@@ -456,30 +563,6 @@ fn what_test(report: &CalibrationReport) -> String {
         Some(t) => format!("on {t}"),
         None => "on the test split".into(),
     }
-}
-
-/// A warning per quantity (position, orientation) on which the calibrated model errs more than the nominal
-/// one: the calibration makes the arm worse there.
-pub fn worse_than_nominal(test: &BeforeAfterSummary, on: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    if test.after.mean_mm > test.before.mean_mm {
-        out.push(format!(
-            "the calibrated model is WORSE than the nominal one {on}: mean position error {:.4} mm against {:.4} mm \
-             (Measured); do not use it",
-            test.after.mean_mm, test.before.mean_mm
-        ));
-    }
-    if let Some(o) = &test.orientation
-        && o.after.mean_rad > o.before.mean_rad
-    {
-        out.push(format!(
-            "the calibrated model is WORSE than the nominal one {on} in orientation: mean {:.3} mrad against {:.3} \
-             mrad (Measured)",
-            o.after.mean_rad * 1e3,
-            o.before.mean_rad * 1e3
-        ));
-    }
-    out
 }
 
 fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
@@ -550,140 +633,22 @@ fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Resu
         .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
 }
 
-/// What to apply a saved model to (the flags of `calibrate apply`).
-#[derive(Clone, Debug)]
-pub struct ApplyOptions {
-    /// A `model.json` written by [`fit`].
-    pub model: PathBuf,
-    /// Joint configurations: one column per joint of the model.
-    pub data: PathBuf,
-    /// A column mapping for reading `data`.
-    pub mapping: Option<PathBuf>,
-    /// Output CSV.
-    pub out: PathBuf,
-}
-
-/// What [`apply`] did.
-#[derive(Clone, Debug)]
-pub struct ApplyOutcome {
-    pub configurations: usize,
-    /// Configurations outside the model's training domain (the `domain` column).
-    pub outside_domain: usize,
-    /// What the user must know, one sentence each (printed as `warning:`).
-    pub warnings: Vec<String>,
-    /// Configurations without a corrected command: the inverse is undefined there.
-    pub without_command: usize,
-    pub out: PathBuf,
-}
-
-/// Writes the saved model's predicted pose and corrected joint command for every configuration of
-/// `options.data` to `options.out`.
-pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
-    let model = SavedModel::read(&options.model)?;
-    let joint_names = model.joint_names().to_vec();
-    let (ids, configurations) = match &options.mapping {
-        Some(path) => {
-            let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
-            ColumnMapping::load(path)?.read_joints(&options.data, &joint_names, &prismatic)?
-        }
-        None => dataset::read_joints(&options.data, &joint_names)?,
-    };
-    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
-    JointRange::plausible(&joint_names, &prismatic).check(
-        &options.data.display().to_string(),
-        &ids,
-        &configurations,
-    )?;
-    let out = &options.out;
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
-    let mut header: Vec<String> = vec!["point_id".into()];
-    header.extend(joint_names.iter().cloned());
-    header.extend(
-        [
-            "predicted_x",
-            "predicted_y",
-            "predicted_z",
-            "predicted_qw",
-            "predicted_qx",
-            "predicted_qy",
-            "predicted_qz",
-        ]
-        .map(String::from),
-    );
-    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
-    header.push("compensation_residual_m".into());
-    header.push("status".into());
-    header.push("domain_distance_rad".into());
-    header.push("domain".into());
-    w.write_record(&header).map_err(csv_err)?;
-    // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
-    // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
-    let (mut singular, mut outside) = (0, 0);
-    for (id, q) in ids.iter().zip(&configurations) {
-        let p = model.predict(q);
-        let r: UnitQuaternion<f64> = p.orientation;
-        let pos: Point3<f64> = p.position;
-        let mut row = vec![id.clone()];
-        row.extend(q.iter().map(|v| v.to_string()));
-        row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
-        match model.compensate(q) {
-            Ok((command, residual)) => {
-                row.extend(command.iter().map(|v| v.to_string()));
-                row.push(residual.to_string());
-                row.push("ok".into());
-            }
-            Err(e) => {
-                singular += 1;
-                row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
-                row.push(format!("no command: {}", e.detail()));
-            }
-        }
-        // Extra inputs are not read here: the model takes their training means, always inside.
-        let placement = test_points::place(model.as_ref(), q, &[]);
-        outside += usize::from(!placement.inside);
-        row.push(placement.distance_rad.to_string());
-        row.push(test_points::domain_cell(&placement));
-        w.write_record(&row).map_err(csv_err)?;
-    }
-    let bytes = w
-        .into_inner()
-        .map_err(|e| Error::Invalid(format!("{}: {e}", out.display())))?;
-    output::write_file(out, &bytes)?;
-    Ok(ApplyOutcome {
-        configurations: ids.len(),
-        without_command: singular,
-        outside_domain: outside,
-        warnings: (outside > 0)
-            .then(|| {
-                format!(
-                    "{outside} of {} configurations lie outside the model's training domain (column `domain`); \
-                     a regression is not extrapolated there, the model falls back to its parametric part",
-                    ids.len()
-                )
-            })
-            .into_iter()
-            .collect(),
-        out: out.clone(),
-    })
-}
-
-/// `calibrate --method`'s values, each with what the method is, as `--help` lists them.
-pub fn method_values() -> clap::builder::PossibleValuesParser {
-    use clap::builder::PossibleValue;
-    clap::builder::PossibleValuesParser::new(
+/// `calibrate --method`'s values, each with what the method is, as `--help` lists them; parsed once, here.
+pub fn method_values() -> impl TypedValueParser<Value = MethodKind> {
+    PossibleValuesParser::new(
         MethodKind::ALL.map(|m| PossibleValue::new(m.name()).help(m.info().summary)),
     )
+    .try_map(|name| MethodKind::parse(&name))
 }
 
 /// `calibrate --test-registration`'s values.
-pub fn registration_values() -> clap::builder::PossibleValuesParser {
-    use clap::builder::PossibleValue;
-    clap::builder::PossibleValuesParser::new([
+pub fn registration_values() -> impl TypedValueParser<Value = TestRegistration> {
+    PossibleValuesParser::new([
         PossibleValue::new("refit").help(
             "the test campaign's tracker frame and probe mounting, registered on its own points (another \
              station, another day)",
         ),
         PossibleValue::new("model").help("the model's registration (same station and probe)"),
     ])
+    .try_map(|name| TestRegistration::parse(&name))
 }

@@ -5,15 +5,18 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use serde_json::json;
+use serde_json::{Value, json};
 
 use crate::campaign::{Simulation, trajectory};
 use crate::error::{Error, Result};
 use crate::eval::{self, Budget, Evaluation, Stats};
+use crate::report::answer::answer_text;
+use crate::report::metrics::worse_than_nominal;
 use crate::scenario::Scenario;
 use crate::study::shard::assemble;
 use crate::study::sweep::{self, Progress, RunOptions};
 use crate::study::{StudyPart, StudyResult};
+use crate::tracker::TrackerConfig;
 use crate::{measurements, output, report};
 
 /// Every file a campaign may write at the top of its directory; a rerun replaces any of them (a file the
@@ -87,79 +90,145 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         super::check_study_budget(&scenario, rayon::current_num_threads(), options.long)?;
     }
     let started = Instant::now();
-    let (sim, replay) = match &options.replay {
-        None => (super::simulate(&scenario)?, None),
-        Some(_) if scenario.campaign.trajectory.is_some() => {
-            return Err(Error::Scenario {
-                origin: scenario.origin.clone(),
-                message: "campaign.trajectory with --replay: a replay reproduces the real campaign's points as \
-                          they were measured; drop one"
-                    .into(),
-            });
-        }
-        Some(source) => {
-            let data = super::replay::read(
-                &scenario.load_robot()?,
-                &source.file,
-                source.mapping.as_deref(),
-            )?;
-            let replay = super::replay::replay(&mut scenario, &data, 0)?;
-            let frame = &replay.registration.frame;
-            let report = ReplayReport {
-                file: source.file.clone(),
-                mapping: source.mapping.clone(),
-                rows: data.len(),
-                registration_rms_m: frame.rms,
-                mounting_m: frame.mounting.coords.into(),
-                placement_residual_rad: replay.placement_residual_rad,
-            };
-            (replay.sim, Some(report))
-        }
-    };
-    // Measured on the fly: the planned targets become the waypoints of one path, sampled as the arm moves.
-    let (sim, motion) = match &scenario.campaign.trajectory {
-        Some(config) if replay.is_none() => {
-            let moved = trajectory::measure(
-                &sim.world,
-                &sim.campaign,
-                &scenario.campaign.posture_rad(),
-                config,
-                sim.world.seed(),
-            )
-            .map_err(|e| e.in_scenario(&scenario.origin))?;
-            let motion = MotionReport {
-                targets: sim.campaign.points.len(),
-                samples: moved.campaign.points.len(),
-                duration_s: moved.duration_s,
-                clock_offset_s: config.clock_offset_s,
-                dynamic_max_mm: moved.dynamic_m.iter().fold(0.0, |a: f64, d| a.max(*d)) * 1e3,
-                lost_acceptance_cone: moved.lost_acceptance_cone,
-                lost_line_of_sight: moved.lost_line_of_sight,
-            };
-            let sim = Simulation {
-                world: sim.world,
-                campaign: moved.campaign,
-            };
-            (sim, Some(motion))
-        }
-        _ => (sim, None),
+    let (sim, replay) = simulate_or_replay(&mut scenario, options)?;
+    let (sim, motion) = match replay {
+        None => on_the_fly(&scenario, sim)?,
+        Some(_) => (sim, None),
     };
     if replay.is_some() {
         scenario.evaluation = None;
         scenario.study = None;
     }
     let generated = started.elapsed();
-    let world = &sim.world;
     let campaign = &sim.campaign;
 
     let measured = eval::measured(campaign)?;
     let commands: Vec<Vec<f64>> = campaign.points.iter().map(|p| p.q_cmd.clone()).collect();
+    let world = &sim.world;
     let budget = Budget::of(&world.nominal, &world.robot, &world.mounting, &commands)?;
 
     let out = options
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("results").join(&scenario.world.name));
+    let report = campaign_json(
+        &scenario,
+        &sim,
+        &measured,
+        &budget,
+        replay.as_ref(),
+        motion.as_ref(),
+    )?;
+    let mut files: Vec<(String, Vec<u8>)> = vec![
+        (
+            "measurements.csv".into(),
+            measurements::measurements_csv(campaign)?,
+        ),
+        ("truth.csv".into(), measurements::truth_csv(campaign)?),
+        ("campaign.json".into(), to_json("campaign.json", &report)?),
+    ];
+    let evaluation = evaluate(&scenario, &sim)?;
+    if let Some((evaluation, _)) = &evaluation {
+        files.push((
+            "evaluation.json".into(),
+            to_json("evaluation.json", evaluation)?,
+        ));
+    }
+    let study = study(&scenario, &sim, options)?;
+    if let Some((study, _)) = &study {
+        files.extend(report::study_files(study, &world.nominal)?);
+    }
+    output::write_dir(&out, &files, OUTPUTS)?;
+    Ok(CampaignRun {
+        scenario,
+        sim,
+        generated,
+        measured,
+        budget,
+        evaluation,
+        study,
+        replay,
+        motion,
+        out,
+    })
+}
+
+/// The scenario's campaign, or with `--replay` the real campaign's configurations measured in the scenario's
+/// world (which the replay places where the real tracker and reflector were).
+fn simulate_or_replay(
+    scenario: &mut Scenario,
+    options: &Options,
+) -> Result<(Simulation, Option<ReplayReport>)> {
+    let Some(source) = &options.replay else {
+        return Ok((super::simulate(scenario)?, None));
+    };
+    if scenario.campaign.trajectory.is_some() {
+        return Err(Error::Scenario {
+            origin: scenario.origin.clone(),
+            message: "campaign.trajectory with --replay: a replay reproduces the real campaign's points as \
+                      they were measured; drop one"
+                .into(),
+        });
+    }
+    let data = super::replay::read(
+        &scenario.load_robot()?,
+        &source.file,
+        source.mapping.as_deref(),
+    )?;
+    let replay = super::replay::replay(scenario, &data, 0)?;
+    let frame = &replay.registration.frame;
+    let report = ReplayReport {
+        file: source.file.clone(),
+        mapping: source.mapping.clone(),
+        rows: data.len(),
+        registration_rms_m: frame.rms,
+        mounting_m: frame.mounting.coords.into(),
+        placement_residual_rad: replay.placement_residual_rad,
+    };
+    Ok((replay.sim, Some(report)))
+}
+
+/// With `[campaign.trajectory]`, the campaign measured on the fly: the planned targets become the waypoints of
+/// one path, sampled as the arm moves.
+fn on_the_fly(scenario: &Scenario, sim: Simulation) -> Result<(Simulation, Option<MotionReport>)> {
+    let Some(config) = &scenario.campaign.trajectory else {
+        return Ok((sim, None));
+    };
+    let moved = trajectory::measure(
+        &sim.world,
+        &sim.campaign,
+        &scenario.campaign.posture_rad(),
+        config,
+        sim.world.seed(),
+    )
+    .map_err(|e| e.in_scenario(&scenario.origin))?;
+    let motion = MotionReport {
+        targets: sim.campaign.points.len(),
+        samples: moved.campaign.points.len(),
+        duration_s: moved.duration_s,
+        clock_offset_s: config.clock_offset_s,
+        dynamic_max_mm: moved.dynamic_m.iter().fold(0.0, |a: f64, d| a.max(*d)) * 1e3,
+        lost_acceptance_cone: moved.lost_acceptance_cone,
+        lost_line_of_sight: moved.lost_line_of_sight,
+    };
+    let sim = Simulation {
+        world: sim.world,
+        campaign: moved.campaign,
+    };
+    Ok((sim, Some(motion)))
+}
+
+/// `campaign.json`: the scenario, the campaign's size and rejections, the drawn truth, the measured errors and
+/// the error budget, and what a replay or a motion did.
+fn campaign_json(
+    scenario: &Scenario,
+    sim: &Simulation,
+    measured: &Stats,
+    budget: &Budget,
+    replay: Option<&ReplayReport>,
+    motion: Option<&MotionReport>,
+) -> Result<Value> {
+    let (world, campaign) = (&sim.world, &sim.campaign);
     let q = world.tracker.pose.rotation.quaternion();
     let report = json!({
         "scenario": scenario,
@@ -181,69 +250,53 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
         },
     });
     let mut report = report;
-    if let Some(r) = &replay {
+    if let Some(r) = replay {
         report["replay"] =
             serde_json::to_value(r).map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
     }
-    if let Some(m) = &motion {
+    if let Some(m) = motion {
         report["trajectory"] =
             serde_json::to_value(m).map_err(|e| Error::Invalid(format!("campaign.json: {e}")))?;
     }
-    let mut files: Vec<(String, Vec<u8>)> = vec![
-        (
-            "measurements.csv".into(),
-            measurements::measurements_csv(campaign)?,
-        ),
-        ("truth.csv".into(), measurements::truth_csv(campaign)?),
-        ("campaign.json".into(), to_json("campaign.json", &report)?),
-    ];
-    let evaluation = match &scenario.evaluation {
-        Some(config) => {
-            let started = Instant::now();
-            let evaluation = eval::evaluate(&sim, &scenario.campaign, &scenario.regions, config)?;
-            files.push((
-                "evaluation.json".into(),
-                to_json("evaluation.json", &evaluation)?,
-            ));
-            Some((evaluation, started.elapsed()))
-        }
-        None => None,
+    Ok(report)
+}
+
+/// The scenario's `[evaluation]`, timed, when it has one.
+fn evaluate(scenario: &Scenario, sim: &Simulation) -> Result<Option<(Evaluation, Duration)>> {
+    let Some(config) = &scenario.evaluation else {
+        return Ok(None);
     };
-    let study = match &scenario.study {
-        Some(_) => {
-            let started = Instant::now();
-            let config = super::study_config(&scenario)?;
-            let study = match &options.parts {
-                Some(parts) => assemble(world, &scenario.regions, config, parts.clone()),
-                None => sweep::run_study(
-                    world,
-                    &scenario.campaign,
-                    &scenario.regions,
-                    config,
-                    RunOptions {
-                        progress: Progress::Auto,
-                        timings: options.timings,
-                    },
-                )?,
-            };
-            files.extend(report::study_files(&study, &world.nominal)?);
-            Some((study, started.elapsed()))
-        }
-        None => None,
+    let started = Instant::now();
+    let evaluation = eval::evaluate(sim, &scenario.campaign, &scenario.regions, config)?;
+    Ok(Some((evaluation, started.elapsed())))
+}
+
+/// The scenario's `[study]`, timed, when it has one: run here, or assembled from the shards' parts.
+fn study(
+    scenario: &Scenario,
+    sim: &Simulation,
+    options: &Options,
+) -> Result<Option<(StudyResult, Duration)>> {
+    if scenario.study.is_none() {
+        return Ok(None);
+    }
+    let started = Instant::now();
+    let config = super::study_config(scenario)?;
+    let world = &sim.world;
+    let study = match &options.parts {
+        Some(parts) => assemble(world, &scenario.regions, config, parts.clone()),
+        None => sweep::run_study(
+            world,
+            &scenario.campaign,
+            &scenario.regions,
+            config,
+            RunOptions {
+                progress: Progress::Auto,
+                timings: options.timings,
+            },
+        )?,
     };
-    output::write_dir(&out, &files, OUTPUTS)?;
-    Ok(CampaignRun {
-        scenario,
-        sim,
-        generated,
-        measured,
-        budget,
-        evaluation,
-        study,
-        replay,
-        motion,
-        out,
-    })
+    Ok(Some((study, started.elapsed())))
 }
 
 /// A campaign measured on the fly (`campaign.json`'s `trajectory`).
@@ -282,4 +335,143 @@ pub struct ReplayReport {
 
 fn to_json(name: &str, value: &impl serde::Serialize) -> Result<Vec<u8>> {
     serde_json::to_vec_pretty(value).map_err(|e| Error::Invalid(format!("{name}: {e}")))
+}
+
+impl CampaignRun {
+    /// What `campaign` prints: the campaign, its errors before calibration, and what the replay, the
+    /// evaluation and the study did.
+    pub fn text(&self) -> String {
+        let mut text = self.campaign_text();
+        text += &self.errors_text();
+        if let Some(r) = &self.replay {
+            text += &r.text(&self.scenario.world.tracker);
+        }
+        if let Some((evaluation, took)) = &self.evaluation {
+            text += &evaluation.table();
+            text += &format!(
+                "evaluated {} methods in {:.2} s\n",
+                evaluation.methods.len(),
+                took.as_secs_f64()
+            );
+        }
+        if let Some((study, took)) = &self.study {
+            text += &study_text(study, *took);
+        }
+        text + &format!("wrote {}\n", self.out.display())
+    }
+
+    /// The campaign's size, each region's rejections, and the motion when measured on the fly.
+    fn campaign_text(&self) -> String {
+        let campaign = &self.sim.campaign;
+        let mut text = format!(
+            "scenario '{}': {} points in {:.2} s\n",
+            self.scenario.world.name,
+            campaign.points.len(),
+            self.generated.as_secs_f64()
+        );
+        for (region, r) in &campaign.rejections {
+            text += &format!(
+                "  region '{region}': {} used of {} feasible from {} candidates (rejected: {} out of reach, {} joint limits, \
+                 {} self-collision, {} obstacle, {} line of sight, {} acceptance cone)\n",
+                r.used,
+                r.feasible,
+                r.candidates,
+                r.out_of_reach,
+                r.joint_limits,
+                r.self_collision,
+                r.environment_collision,
+                r.line_of_sight,
+                r.acceptance_cone
+            );
+        }
+        if let Some(m) = &self.motion {
+            text += &m.text();
+        }
+        text
+    }
+
+    /// The measured errors and the error budget (mm).
+    fn errors_text(&self) -> String {
+        let row = |name: &str, s: &Stats| {
+            let s = s.scaled(1e3);
+            format!(
+                "  {name:<34} mean {:.4}  std {:.4}  max {:.4}  rms {:.4}  p95 {:.4}\n",
+                s.mean, s.std, s.max, s.rms, s.p95
+            )
+        };
+        let mut text = if self.study.is_some() {
+            "the scenario's own campaign before calibration (not the study's answer, which follows), distance \
+             errors after rigid registration (mm):\n"
+                .to_string()
+        } else {
+            "distance errors of the reflector (or nest centre) after rigid registration (mm):\n"
+                .to_string()
+        };
+        text += &row("measured (paper's Table 1 column)", &self.measured);
+        text += &row("true, all systematic errors", &self.budget.all_systematic);
+        text += &row("true, elastic deflection only", &self.budget.elastic_only);
+        text += &row("true, rigid errors only", &self.budget.rigid_only);
+        text
+    }
+}
+
+impl MotionReport {
+    fn text(&self) -> String {
+        format!(
+            "  measured on the fly: {} samples along one path through {} targets, {:.1} s of tracker time; motion \
+             moved the flange by up to {:.3} mm; clock offset {:.1} µs (calibrate estimates and removes it); \
+             beam lost at {} samples ({} acceptance cone, {} line of sight)\n",
+            self.samples,
+            self.targets,
+            self.duration_s,
+            self.dynamic_max_mm,
+            self.clock_offset_s * 1e6,
+            self.lost_acceptance_cone + self.lost_line_of_sight,
+            self.lost_acceptance_cone,
+            self.lost_line_of_sight
+        )
+    }
+}
+
+impl ReplayReport {
+    /// Where the replay placed the tracker (the scenario's, rewritten by the replay) and the reflector.
+    fn text(&self, t: &TrackerConfig) -> String {
+        let m = self.mounting_m.map(|v| v * 1e3);
+        format!(
+            "replayed {} rows of {}: real data registered with RMS {:.4} mm; tracker placed at [{:.4}, {:.4}, {:.4}] m, \
+             yaw {:.4}°, tilts [{:.4}, {:.4}]° (decomposition residual {:.1e} rad); reflector at \
+             [{:.3}, {:.3}, {:.3}] mm on the flange\n",
+            self.rows,
+            self.file.display(),
+            self.registration_rms_m * 1e3,
+            t.position_m[0],
+            t.position_m[1],
+            t.position_m[2],
+            t.yaw_deg,
+            t.tilt_deg[0],
+            t.tilt_deg[1],
+            self.placement_residual_rad,
+            m[0],
+            m[1],
+            m[2]
+        )
+    }
+}
+
+/// The study's runs, failures and flags, then its answer.
+fn study_text(study: &StudyResult, took: Duration) -> String {
+    let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
+    let worse = study
+        .runs
+        .iter()
+        .filter(|r| worse_than_nominal(r, study) == Some(true))
+        .count();
+    format!(
+        "study: {} runs ({} failed, reasons in metrics.csv; {} worse than nominal, flagged there) in {:.1} s; \
+         see summary.md, answer.csv, plots/ and campaign.rrd (open with `rerun campaign.rrd`, rerun-sdk 0.36)\n",
+        study.runs.len(),
+        failed,
+        worse,
+        took.as_secs_f64()
+    ) + &answer_text(study)
 }

@@ -1,10 +1,13 @@
 //! The jobs the binaries run: each binary parses its flags into a job's options, calls the job, and prints
 //! what it returns. [`campaign`] runs a scenario: build its world once, hand each stage the world and its own
 //! section, and gather what they return (the only module that reads a [`Scenario`] besides `scenario`
-//! itself); [`calibrate`] fits a method on measured data and applies a saved model; [`real_data`] runs the
-//! real-data protocol of `eval::protocol` on the UR10 series.
+//! itself); [`calibrate`] fits a method on measured data (its `report.json` is [`calibration_report`]) and
+//! [`apply`] applies a saved model to new configurations; [`real_data`] runs the real-data protocol of
+//! `eval::protocol` on the UR10 series.
 
+pub mod apply;
 pub mod calibrate;
+pub mod calibration_report;
 pub mod campaign;
 pub mod real_data;
 pub mod replay;
@@ -24,6 +27,35 @@ use crate::world::World;
 /// The most worker threads `--threads` may ask for: more than the cores of any machine this runs on, and
 /// few enough that starting them cannot exhaust the system (100 000 threads hung it).
 pub const MAX_THREADS: usize = 256;
+
+/// Sets the worker count: `flag` (`--threads`), else `SLURM_CPUS_PER_TASK` (what a Slurm job was given), else
+/// every core.
+pub fn set_threads(flag: Option<usize>) -> Result<()> {
+    let n = match flag {
+        Some(n) => Some((n, "--threads".to_string())),
+        None => match std::env::var("SLURM_CPUS_PER_TASK") {
+            Ok(v) => Some((
+                v.trim().parse().map_err(|_| {
+                    Error::Invalid(format!("SLURM_CPUS_PER_TASK='{v}' is not a thread count"))
+                })?,
+                "SLURM_CPUS_PER_TASK".to_string(),
+            )),
+            Err(_) => None,
+        },
+    };
+    if let Some((n, from)) = n {
+        if !(1..=MAX_THREADS).contains(&n) {
+            return Err(Error::Invalid(format!(
+                "{from} {n}: between 1 and {MAX_THREADS}"
+            )));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?;
+    }
+    Ok(())
+}
 
 /// The command line as `T`, or the process ends: with help or version printed (exit 0), or with one
 /// `error:` line (exit 1, as every other refusal of the tools; clap alone would print its usage and exit 2).

@@ -55,6 +55,23 @@ pub struct ShardRun {
     pub out: PathBuf,
 }
 
+impl ShardRun {
+    /// What `campaign --shard` prints.
+    pub fn text(&self) -> String {
+        format!(
+            "scenario '{}', shard {}: {} of {} campaigns, {} runs ({} failed) in {}; merge every shard's \
+             directory with `campaign merge`\n",
+            self.scenario,
+            self.shard,
+            self.campaigns,
+            self.total_campaigns,
+            self.runs,
+            self.failed,
+            self.out.display()
+        )
+    }
+}
+
 fn fingerprint(scenario: &Scenario) -> Result<String> {
     let json = serde_json::to_vec(scenario)
         .map_err(|e| Error::Invalid(format!("scenario as JSON: {e}")))?;

@@ -14,12 +14,12 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
-use calibench::app::calibrate::{self, ApplyOptions, FitOptions};
+use calibench::app::apply::{self, ApplyOptions};
+use calibench::app::calibrate::{self, FitOptions};
 use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::eval::split::SplitRule;
 use calibench::eval::transfer::TestRegistration;
-use calibench::robot::Payload;
 use calibench::{Error, Result};
 
 #[derive(Parser, Debug)]
@@ -60,7 +60,7 @@ struct FitArgs {
     test_mapping: Option<PathBuf>,
     /// How the test campaign is registered.
     #[arg(long, default_value = "refit", value_parser = calibrate::registration_values())]
-    test_registration: String,
+    test_registration: TestRegistration,
     /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
     #[arg(long)]
     ignore_inputs: bool,
@@ -79,7 +79,7 @@ struct FitArgs {
     flange_link: Option<String>,
     /// The calibration method.
     #[arg(long, default_value = "paper-rotxyz", value_parser = calibrate::method_values())]
-    method: String,
+    method: MethodKind,
     /// Mass on the flange (kg), for the gravity torques of the elastic methods.
     #[arg(long, default_value_t = 0.0)]
     payload_kg: f64,
@@ -136,49 +136,32 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
-    if let Some(Command::Apply(a)) = cli.command {
-        let (model, data, mapping, out) = (a.model, a.data, a.mapping, a.out);
-        let done = calibrate::apply(&ApplyOptions {
-            model,
-            data,
-            mapping,
-            out,
-        })?;
-        let singular = match done.without_command {
-            0 => String::new(),
-            k => format!(" ({k} without a command: singular or extrapolated, see `status`)"),
-        };
-        let (n, out) = (done.configurations, done.out.display());
-        println!("{n} configurations: predicted poses and corrected commands in {out}{singular}");
-        done.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
-        return Ok(());
-    }
-    let done = calibrate::fit(&fit_options(cli.fit)?)?;
-    print!("{}", done.tables);
-    let (r, out) = (&done.report, done.out.display());
-    let (train, val, ms) = (r.n_train, r.n_val, r.fit_ms);
-    println!("fit on {train} training + {val} validation points in {ms:.1} ms; wrote {out}");
-    r.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
+    let (text, warnings) = match cli.command {
+        Some(Command::Apply(a)) => {
+            let done = apply::apply(&ApplyOptions {
+                model: a.model,
+                data: a.data,
+                mapping: a.mapping,
+                out: a.out,
+            })?;
+            (done.text(), done.warnings)
+        }
+        None => {
+            let done = calibrate::fit(&fit_options(cli.fit)?)?;
+            (done.text(), done.report.warnings)
+        }
+    };
+    print!("{text}");
+    warnings.iter().for_each(|w| eprintln!("warning: {w}"));
     Ok(())
 }
-
-const BAD_PAYLOAD: &str =
-    "--payload-kg must be finite and non-negative, --payload-com-m three numbers x,y,z";
 
 /// The flags as the job's options; the values are checked here, before any file is read.
 fn fit_options(args: FitArgs) -> Result<FitOptions> {
     let data = args.data.ok_or_else(|| {
         Error::Invalid("--data FILE.csv is required (or use `calibrate apply`)".into())
     })?;
-    let method = MethodKind::parse(&args.method)?;
-    let payload = match (args.payload_com_m.as_slice(), args.payload_kg) {
-        ([x, y, z], mass) if mass.is_finite() && mass >= 0.0 => Payload {
-            mass,
-            com: [*x, *y, *z],
-        },
-        _ => return Err(Error::Invalid(BAD_PAYLOAD.into())),
-    };
-    let test_registration = TestRegistration::parse(&args.test_registration)?;
+    let payload = calibrate::payload(args.payload_kg, &args.payload_com_m)?;
     let fractions: [f64; 3] = args.split.as_slice().try_into().map_err(|_| {
         let n = args.split.len();
         Error::Invalid(format!(
@@ -190,12 +173,12 @@ fn fit_options(args: FitArgs) -> Result<FitOptions> {
         mapping: args.mapping,
         test_data: args.test_data,
         test_mapping: args.test_mapping,
-        test_registration,
+        test_registration: args.test_registration,
         ignore_inputs: args.ignore_inputs,
         motion_inputs: args.motion_inputs,
         robot: args.robot,
         flange_link: args.flange_link,
-        method,
+        method: args.method,
         payload,
         truth: args.truth,
         out: args.out,

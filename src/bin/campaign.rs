@@ -12,11 +12,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
-use calibench::app::MAX_THREADS;
-use calibench::app::campaign::{self, CampaignRun, Options, ReplaySource};
-use calibench::app::shard;
-use calibench::eval::Stats;
-use calibench::report::metrics::worse_than_nominal;
+use calibench::app::campaign::{self, Options, ReplaySource};
+use calibench::app::{set_threads, shard};
 use calibench::scenario::Scenario;
 use calibench::study::Shard;
 use calibench::{Error, Result};
@@ -97,34 +94,6 @@ fn main() -> ExitCode {
     }
 }
 
-/// Sets the worker count: `--threads`, else `SLURM_CPUS_PER_TASK` (what a Slurm job was given), else every core.
-fn threads(flag: Option<usize>) -> Result<()> {
-    let n = match flag {
-        Some(n) => Some((n, "--threads".to_string())),
-        None => match std::env::var("SLURM_CPUS_PER_TASK") {
-            Ok(v) => Some((
-                v.trim().parse().map_err(|_| {
-                    Error::Invalid(format!("SLURM_CPUS_PER_TASK='{v}' is not a thread count"))
-                })?,
-                "SLURM_CPUS_PER_TASK".to_string(),
-            )),
-            Err(_) => None,
-        },
-    };
-    if let Some((n, from)) = n {
-        if !(1..=MAX_THREADS).contains(&n) {
-            return Err(Error::Invalid(format!(
-                "{from} {n}: between 1 and {MAX_THREADS}"
-            )));
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .map_err(|e| Error::Invalid(format!("cannot start {n} threads: {e}")))?;
-    }
-    Ok(())
-}
-
 fn run(args: &Args) -> Result<()> {
     if let Some(Command::Merge {
         dirs,
@@ -132,13 +101,13 @@ fn run(args: &Args) -> Result<()> {
         threads: t,
     }) = &args.command
     {
-        threads(*t)?;
+        set_threads(*t)?;
         let done = shard::merge(dirs, out.clone())?;
         println!("merged {} shard directories", dirs.len());
-        print(&done);
+        print!("{}", done.text());
         return Ok(());
     }
-    threads(args.threads)?;
+    set_threads(args.threads)?;
     let scenario = match &args.scenario {
         Some(path) => Scenario::load(path)?,
         None => Scenario::parse(DEFAULT_SCENARIO, "embedded default.toml")?,
@@ -152,17 +121,7 @@ fn run(args: &Args) -> Result<()> {
             args.timings,
             args.long,
         )?;
-        println!(
-            "scenario '{}', shard {}: {} of {} campaigns, {} runs ({} failed) in {}; merge every shard's \
-             directory with `campaign merge`",
-            done.scenario,
-            done.shard,
-            done.campaigns,
-            done.total_campaigns,
-            done.runs,
-            done.failed,
-            done.out.display()
-        );
+        print!("{}", done.text());
         return Ok(());
     }
     let options = Options {
@@ -176,115 +135,6 @@ fn run(args: &Args) -> Result<()> {
         parts: None,
     };
     let done = campaign::run(scenario, &options)?;
-    print(&done);
+    print!("{}", done.text());
     Ok(())
-}
-
-fn print(done: &CampaignRun) {
-    let campaign = &done.sim.campaign;
-    println!(
-        "scenario '{}': {} points in {:.2} s",
-        done.scenario.world.name,
-        campaign.points.len(),
-        done.generated.as_secs_f64()
-    );
-    for (region, r) in &campaign.rejections {
-        println!(
-            "  region '{region}': {} used of {} feasible from {} candidates (rejected: {} out of reach, {} joint limits, \
-             {} self-collision, {} obstacle, {} line of sight, {} acceptance cone)",
-            r.used,
-            r.feasible,
-            r.candidates,
-            r.out_of_reach,
-            r.joint_limits,
-            r.self_collision,
-            r.environment_collision,
-            r.line_of_sight,
-            r.acceptance_cone
-        );
-    }
-    if let Some(m) = &done.motion {
-        println!(
-            "  measured on the fly: {} samples along one path through {} targets, {:.1} s of tracker time; motion \
-             moved the flange by up to {:.3} mm; clock offset {:.1} µs (calibrate estimates and removes it); \
-             beam lost at {} samples ({} acceptance cone, {} line of sight)",
-            m.samples,
-            m.targets,
-            m.duration_s,
-            m.dynamic_max_mm,
-            m.clock_offset_s * 1e6,
-            m.lost_acceptance_cone + m.lost_line_of_sight,
-            m.lost_acceptance_cone,
-            m.lost_line_of_sight
-        );
-    }
-    let row = |name: &str, s: &Stats| {
-        let s = s.scaled(1e3);
-        println!(
-            "  {name:<34} mean {:.4}  std {:.4}  max {:.4}  rms {:.4}  p95 {:.4}",
-            s.mean, s.std, s.max, s.rms, s.p95
-        );
-    };
-    if done.study.is_some() {
-        println!(
-            "the scenario's own campaign before calibration (not the study's answer, which follows), distance \
-             errors after rigid registration (mm):"
-        );
-    } else {
-        println!(
-            "distance errors of the reflector (or nest centre) after rigid registration (mm):"
-        );
-    }
-    row("measured (paper's Table 1 column)", &done.measured);
-    row("true, all systematic errors", &done.budget.all_systematic);
-    row("true, elastic deflection only", &done.budget.elastic_only);
-    row("true, rigid errors only", &done.budget.rigid_only);
-    if let Some(r) = &done.replay {
-        let t = &done.scenario.world.tracker;
-        let m = r.mounting_m.map(|v| v * 1e3);
-        println!(
-            "replayed {} rows of {}: real data registered with RMS {:.4} mm; tracker placed at [{:.4}, {:.4}, {:.4}] m, \
-             yaw {:.4}°, tilts [{:.4}, {:.4}]° (decomposition residual {:.1e} rad); reflector at \
-             [{:.3}, {:.3}, {:.3}] mm on the flange",
-            r.rows,
-            r.file.display(),
-            r.registration_rms_m * 1e3,
-            t.position_m[0],
-            t.position_m[1],
-            t.position_m[2],
-            t.yaw_deg,
-            t.tilt_deg[0],
-            t.tilt_deg[1],
-            r.placement_residual_rad,
-            m[0],
-            m[1],
-            m[2]
-        );
-    }
-    if let Some((evaluation, took)) = &done.evaluation {
-        print!("{}", evaluation.table());
-        println!(
-            "evaluated {} methods in {:.2} s",
-            evaluation.methods.len(),
-            took.as_secs_f64()
-        );
-    }
-    if let Some((study, took)) = &done.study {
-        let failed = study.runs.iter().filter(|r| r.failure.is_some()).count();
-        let worse = study
-            .runs
-            .iter()
-            .filter(|r| worse_than_nominal(r, study) == Some(true))
-            .count();
-        println!(
-            "study: {} runs ({} failed, reasons in metrics.csv; {} worse than nominal, flagged there) in {:.1} s; \
-             see summary.md, answer.csv, plots/ and campaign.rrd (open with `rerun campaign.rrd`, rerun-sdk 0.36)",
-            study.runs.len(),
-            failed,
-            worse,
-            took.as_secs_f64()
-        );
-        print!("{}", calibench::report::answer::answer_text(study));
-    }
-    println!("wrote {}", done.out.display());
 }

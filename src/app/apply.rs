@@ -1,0 +1,145 @@
+//! The `calibrate apply` job: a saved model's predicted poses and corrected joint commands for new joint
+//! configurations.
+
+use std::path::PathBuf;
+
+use nalgebra::{Point3, UnitQuaternion};
+
+use crate::calib::registry::SavedModel;
+use crate::dataset;
+use crate::dataset::mapping::ColumnMapping;
+use crate::dataset::range::JointRange;
+use crate::error::{Error, Result};
+use crate::output;
+
+use super::test_points;
+
+/// What to apply a saved model to (the flags of `calibrate apply`).
+#[derive(Clone, Debug)]
+pub struct ApplyOptions {
+    /// A `model.json` written by [`super::calibrate::fit`].
+    pub model: PathBuf,
+    /// Joint configurations: one column per joint of the model.
+    pub data: PathBuf,
+    /// A column mapping for reading `data`.
+    pub mapping: Option<PathBuf>,
+    /// Output CSV.
+    pub out: PathBuf,
+}
+
+/// What [`apply`] did.
+#[derive(Clone, Debug)]
+pub struct ApplyOutcome {
+    pub configurations: usize,
+    /// Configurations outside the model's training domain (the `domain` column).
+    pub outside_domain: usize,
+    /// What the user must know, one sentence each (printed as `warning:`).
+    pub warnings: Vec<String>,
+    /// Configurations without a corrected command: the inverse is undefined there.
+    pub without_command: usize,
+    pub out: PathBuf,
+}
+
+impl ApplyOutcome {
+    /// The line `calibrate apply` prints (the warnings go to stderr apart).
+    pub fn text(&self) -> String {
+        let singular = match self.without_command {
+            0 => String::new(),
+            k => format!(" ({k} without a command: singular or extrapolated, see `status`)"),
+        };
+        let (n, out) = (self.configurations, self.out.display());
+        format!("{n} configurations: predicted poses and corrected commands in {out}{singular}\n")
+    }
+}
+
+/// Writes the saved model's predicted pose and corrected joint command for every configuration of
+/// `options.data` to `options.out`.
+pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
+    let model = SavedModel::read(&options.model)?;
+    let joint_names = model.joint_names().to_vec();
+    let (ids, configurations) = match &options.mapping {
+        Some(path) => {
+            let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+            ColumnMapping::load(path)?.read_joints(&options.data, &joint_names, &prismatic)?
+        }
+        None => dataset::read_joints(&options.data, &joint_names)?,
+    };
+    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
+    JointRange::plausible(&joint_names, &prismatic).check(
+        &options.data.display().to_string(),
+        &ids,
+        &configurations,
+    )?;
+    let out = &options.out;
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
+    let mut header: Vec<String> = vec!["point_id".into()];
+    header.extend(joint_names.iter().cloned());
+    header.extend(
+        [
+            "predicted_x",
+            "predicted_y",
+            "predicted_z",
+            "predicted_qw",
+            "predicted_qx",
+            "predicted_qy",
+            "predicted_qz",
+        ]
+        .map(String::from),
+    );
+    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
+    header.push("compensation_residual_m".into());
+    header.push("status".into());
+    header.push("domain_distance_rad".into());
+    header.push("domain".into());
+    w.write_record(&header).map_err(csv_err)?;
+    // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
+    // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
+    let (mut singular, mut outside) = (0, 0);
+    for (id, q) in ids.iter().zip(&configurations) {
+        let p = model.predict(q);
+        let r: UnitQuaternion<f64> = p.orientation;
+        let pos: Point3<f64> = p.position;
+        let mut row = vec![id.clone()];
+        row.extend(q.iter().map(|v| v.to_string()));
+        row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
+        match model.compensate(q) {
+            Ok((command, residual)) => {
+                row.extend(command.iter().map(|v| v.to_string()));
+                row.push(residual.to_string());
+                row.push("ok".into());
+            }
+            Err(e) => {
+                singular += 1;
+                row.extend(std::iter::repeat_n(String::new(), joint_names.len() + 1));
+                row.push(format!("no command: {}", e.detail()));
+            }
+        }
+        // Extra inputs are not read here: the model takes their training means, always inside.
+        let placement = test_points::place(model.as_ref(), q, &[]);
+        outside += usize::from(!placement.inside);
+        row.push(placement.distance_rad.to_string());
+        row.push(test_points::domain_cell(&placement));
+        w.write_record(&row).map_err(csv_err)?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| Error::Invalid(format!("{}: {e}", out.display())))?;
+    output::write_file(out, &bytes)?;
+    Ok(ApplyOutcome {
+        configurations: ids.len(),
+        without_command: singular,
+        outside_domain: outside,
+        warnings: (outside > 0)
+            .then(|| {
+                format!(
+                    "{outside} of {} configurations lie outside the model's training domain (column `domain`); \
+                     a regression is not extrapolated there, the model falls back to its parametric part",
+                    ids.len()
+                )
+            })
+            .into_iter()
+            .collect(),
+        out: out.clone(),
+    })
+}
