@@ -37,7 +37,7 @@ pub fn write_dir<N: AsRef<str>>(
         .map(|(n, _)| top_level(n.as_ref()))
         .chain(replaces.iter().copied())
         .collect();
-    let target = Target::of(dir)?;
+    let target = Destination::of(dir)?;
     target.check_replaceable(&known)?;
     let _lock = Lock::take(&target)?;
     target.clean_leftovers();
@@ -53,7 +53,7 @@ pub fn write_dir<N: AsRef<str>>(
 /// Checks, before a long computation, that [`write_dir`] would accept `dir` (not a file, not a directory of
 /// someone else's files); the same check runs again when writing.
 pub fn check_dir(dir: &Path, replaces: &[&str]) -> Result<()> {
-    Target::of(dir)?.check_replaceable(replaces)
+    Destination::of(dir)?.check_replaceable(replaces)
 }
 
 /// Writes one file atomically: a temporary beside it (`.NAME.tmp-PID`), renamed over it. Refuses a path
@@ -103,14 +103,14 @@ fn write_into<N: AsRef<str>>(temp: &Path, files: &[(N, Vec<u8>)]) -> Result<()> 
 }
 
 /// The output directory, split into its parent and its name.
-struct Target {
+struct Destination {
     path: PathBuf,
     parent: PathBuf,
     name: String,
 }
 
-impl Target {
-    fn of(dir: &Path) -> Result<Target> {
+impl Destination {
+    fn of(dir: &Path) -> Result<Destination> {
         // `.`, `..` or a trailing `/..` have no name of their own: use the directory they resolve to.
         let resolved = match dir.file_name() {
             Some(_) => dir.to_path_buf(),
@@ -120,7 +120,7 @@ impl Target {
         };
         let name = file_name(&resolved)?.to_string();
         let parent = parent_of(&resolved);
-        Ok(Target {
+        Ok(Destination {
             path: resolved,
             parent,
             name,
@@ -223,7 +223,7 @@ struct Lock {
 
 impl Lock {
     #[cfg(unix)]
-    fn take(target: &Target) -> Result<Lock> {
+    fn take(target: &Destination) -> Result<Lock> {
         use std::io::Read;
         use std::os::unix::fs::MetadataExt;
         use std::os::unix::io::AsRawFd;
@@ -280,7 +280,7 @@ impl Lock {
     /// Without `flock`: the lock file created exclusively, with the holder's process id; a lock whose
     /// process is gone is stale and taken over.
     #[cfg(not(unix))]
-    fn take(target: &Target) -> Result<Lock> {
+    fn take(target: &Destination) -> Result<Lock> {
         fs::create_dir_all(&target.parent).map_err(|e| Error::io(&target.parent, e))?;
         let path = target.sibling("lock");
         for _ in 0..2 {
@@ -469,7 +469,7 @@ mod tests {
     #[test]
     fn a_held_lock_refuses_a_second_writer() {
         let root = tempfile::tempdir().unwrap();
-        let target = Target::of(&root.path().join("run")).unwrap();
+        let target = Destination::of(&root.path().join("run")).unwrap();
         let held = Lock::take(&target).unwrap();
         let e = write_files(&target.path, &[("a", vec![])])
             .unwrap_err()

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use tempfile::TempDir;
 
-use calibench::app::campaign::{self, Options, ReplaySource};
+use calibench::app::campaign::{self, CampaignOptions, ReplaySource};
 use calibench::dataset::Dataset;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::robot::urdf;
@@ -54,13 +54,13 @@ fn replay(
 ) -> campaign::CampaignRun {
     campaign::run(
         scenario,
-        &Options {
+        &CampaignOptions {
             out: Some(out.to_path_buf()),
             replay: Some(ReplaySource {
                 file: file.to_path_buf(),
                 mapping,
             }),
-            ..Options::default()
+            ..CampaignOptions::default()
         },
     )
     .expect("the replay runs")
@@ -132,9 +132,9 @@ fn the_replay_places_the_tracker_and_the_reflector_where_they_were() {
         ([0.9, 3.1, 1.4], -23.0, [1.5, -2.5], [0.004, -0.003, 0.085]);
     let planned = campaign::run(
         exact_world(yaw, tilt, position, reflector),
-        &Options {
+        &CampaignOptions {
             out: Some(dir.path().join("planned")),
-            ..Options::default()
+            ..CampaignOptions::default()
         },
     )
     .unwrap();
@@ -229,13 +229,13 @@ fn a_row_outside_the_joint_limits_is_an_error_naming_it() {
     let out = dir.path().join("out");
     let err = campaign::run(
         ur10_ipa(),
-        &Options {
+        &CampaignOptions {
             out: Some(out.clone()),
             replay: Some(ReplaySource {
                 file: file.clone(),
                 mapping: None,
             }),
-            ..Options::default()
+            ..CampaignOptions::default()
         },
     )
     .err()

@@ -37,7 +37,7 @@ const OUTPUTS: &[&str] = &[
 
 /// How to run the job.
 #[derive(Clone, Debug, Default)]
-pub struct Options {
+pub struct CampaignOptions {
     /// Output directory; `results/<scenario name>` when absent.
     pub out: Option<PathBuf>,
     /// Keep the wall-clock fit times in the study's `fit_ms` column (otherwise NaN, so that the files are
@@ -82,7 +82,7 @@ pub struct CampaignRun {
 
 /// Runs `scenario` and writes `measurements.csv`, `truth.csv`, `campaign.json`, and, as the scenario asks,
 /// `evaluation.json` and the study's files, into the output directory, all or none.
-pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
+pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<CampaignRun> {
     if let Some(out) = &options.out {
         output::check_dir(out, OUTPUTS)?;
     }
@@ -157,7 +157,7 @@ pub fn run(mut scenario: Scenario, options: &Options) -> Result<CampaignRun> {
 /// world (which the replay places where the real tracker and reflector were).
 fn simulate_or_replay(
     scenario: &mut Scenario,
-    options: &Options,
+    options: &CampaignOptions,
 ) -> Result<(Simulation, Option<ReplayReport>)> {
     let Some(source) = &options.replay else {
         return Ok((super::simulate(scenario)?, None));
@@ -275,7 +275,7 @@ fn evaluate(scenario: &Scenario, sim: &Simulation) -> Result<Option<(Evaluation,
 fn study(
     scenario: &Scenario,
     sim: &Simulation,
-    options: &Options,
+    options: &CampaignOptions,
 ) -> Result<Option<(StudyResult, Duration)>> {
     if scenario.study.is_none() {
         return Ok(None);

@@ -40,7 +40,7 @@ pub const SERIES: [(&str, &str); 3] = [
 
 /// Where the data is and what to run (the flags of `real_data`).
 #[derive(Clone, Debug)]
-pub struct Options {
+pub struct RealDataOptions {
     /// The data set's directory (Series_B, Series_C, Series_D).
     pub data_dir: PathBuf,
     pub mapping: PathBuf,
@@ -70,7 +70,7 @@ pub const MAX_DRAWS: usize = 100;
 pub const MAX_SIZES: usize = 50;
 pub const MAX_CURVE_POINTS: usize = 100_000;
 
-impl Options {
+impl RealDataOptions {
     /// The counts, before any file is read: a curve of no draws would print a table of nothing.
     pub fn validate(&self) -> Result<()> {
         let Some(sizes) = &self.sizes else {
@@ -103,7 +103,7 @@ impl Options {
 /// Reads the three series of `options.data_dir` through the mapping, runs the protocol, hands each table to
 /// `show` as Markdown as soon as it is ready, and writes `real_data.json` into `options.out`. Returns the
 /// file's path.
-pub fn run(options: &Options, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
+pub fn run(options: &RealDataOptions, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
     options.validate()?;
     output::check_dir(&options.out, &["real_data.json"])?;
     if !options.data_dir.is_dir() {

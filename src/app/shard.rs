@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::campaign::{self, CampaignRun, Options};
+use super::campaign::{self, CampaignOptions, CampaignRun};
 use crate::error::{Error, Result};
 use crate::output;
 use crate::report::metrics::metrics_csv;
@@ -292,12 +292,12 @@ pub fn merge(dirs: &[PathBuf], out: Option<PathBuf>) -> Result<CampaignRun> {
     let parts = by_index.into_values().map(|(_, p)| p).collect();
     campaign::run(
         scenario,
-        &Options {
+        &CampaignOptions {
             out,
             // The shards decided what the fit_ms column holds.
             timings: true,
             parts: Some(parts),
-            ..Options::default()
+            ..CampaignOptions::default()
         },
     )
 }

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::real_data::{self, Options, SERIES, Tables, name, read_series};
+use super::real_data::{self, RealDataOptions, SERIES, Tables, name, read_series};
 use super::replay;
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
@@ -26,7 +26,7 @@ use crate::scenario::Scenario;
 
 /// Where a series' replay put the tracker and the probe.
 #[derive(Clone, Debug, Serialize)]
-pub struct Placement {
+pub struct TrackerPlacement {
     pub series: String,
     pub registration_rms_mm: f64,
     pub tracker_position_m: [f64; 3],
@@ -52,7 +52,7 @@ pub struct Line {
 pub fn simulate_series(
     scenario: &Scenario,
     real: &[Dataset],
-) -> Result<(Vec<Dataset>, Vec<Placement>)> {
+) -> Result<(Vec<Dataset>, Vec<TrackerPlacement>)> {
     let mut sims = Vec::new();
     let mut placements = Vec::new();
     for (k, (data, (series, _))) in real.iter().zip(SERIES).enumerate() {
@@ -60,7 +60,7 @@ pub fn simulate_series(
         let r = replay::replay(&mut scenario, data, k as u64)?;
         sims.push(replay::as_dataset(&r, data)?);
         let t = &scenario.world.tracker;
-        placements.push(Placement {
+        placements.push(TrackerPlacement {
             series: series.to_string(),
             registration_rms_mm: r.registration.frame.rms * 1e3,
             tracker_position_m: t.position_m,
@@ -205,7 +205,11 @@ fn csv(lines: &[Line]) -> Result<Vec<u8>> {
 /// Reads the real series as `real_data` does, replays them in `scenario`, runs the protocol on both, shows
 /// the placements and the side-by-side tables, and writes `sim_vs_real.json` and `sim_vs_real.csv` into
 /// `options.out`. Returns the JSON file's path.
-pub fn run(options: &Options, scenario: &Path, show: &mut dyn FnMut(&str)) -> Result<PathBuf> {
+pub fn run(
+    options: &RealDataOptions,
+    scenario: &Path,
+    show: &mut dyn FnMut(&str),
+) -> Result<PathBuf> {
     let scenario = Scenario::load(scenario)?;
     let chain = crate::robot::load(&options.robot, None)?;
     let simulated = scenario.load_robot()?;
@@ -252,7 +256,7 @@ pub fn run(options: &Options, scenario: &Path, show: &mut dyn FnMut(&str)) -> Re
     Ok(options.out.join("sim_vs_real.json"))
 }
 
-fn placements_md(placements: &[Placement], scenario: &str) -> String {
+fn placements_md(placements: &[TrackerPlacement], scenario: &str) -> String {
     let mut out = format!(
         "#### The replays in '{scenario}': where the registration of each real series put the tracker and the probe\n\n\
          | series | registration RMS (mm) | tracker position (m) | yaw (°) | tilts (°) | probe on the flange (mm) |\n\

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
-use calibench::app::campaign::{self, Options, ReplaySource};
+use calibench::app::campaign::{self, CampaignOptions, ReplaySource};
 use calibench::app::{set_threads, shard};
 use calibench::scenario::Scenario;
 use calibench::study::Shard;
@@ -124,7 +124,7 @@ fn run(args: &Args) -> Result<()> {
         print!("{}", done.text());
         return Ok(());
     }
-    let options = Options {
+    let options = CampaignOptions {
         out: args.out.clone(),
         timings: args.timings,
         replay: args.replay.clone().map(|file| ReplaySource {

@@ -24,7 +24,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
-use calibench::app::real_data::{self, Options};
+use calibench::app::real_data::{self, RealDataOptions};
 use calibench::app::sim_vs_real;
 
 #[derive(Parser, Debug)]
@@ -66,7 +66,7 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = calibench::app::parse_args::<Cli>();
-    let options = Options {
+    let options = RealDataOptions {
         data_dir: cli.data_dir,
         mapping: cli.mapping,
         robot: cli.robot,

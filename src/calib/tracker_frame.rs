@@ -394,7 +394,7 @@ fn fit_frame(
     }
     let nominal: Vec<Point3<f64>> = flanges.iter().map(|f| f * mounting_guess).collect();
     let first = register_points(measured, &nominal)?;
-    let problem = Problem {
+    let problem = RegistrationProblem {
         measured,
         flanges,
         base_rotation: first.transform.rotation,
@@ -435,7 +435,7 @@ fn fit_frame(
 
 /// Parameters: a rotation vector applied on the left of the closed-form rotation, the translation, the mounting
 /// (or, with `directions`, its offsets from `mounting` along them).
-struct Problem<'a> {
+struct RegistrationProblem<'a> {
     measured: &'a [Point3<f64>],
     flanges: &'a [Isometry3<f64>],
     base_rotation: UnitQuaternion<f64>,
@@ -444,7 +444,7 @@ struct Problem<'a> {
     params: DVector<f64>,
 }
 
-impl Problem<'_> {
+impl RegistrationProblem<'_> {
     fn unpack(&self) -> (Isometry3<f64>, Point3<f64>) {
         let p = &self.params;
         let rotation =
@@ -463,7 +463,7 @@ impl Problem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+impl LeastSquaresProblem<f64, Dyn, Dyn> for RegistrationProblem<'_> {
     type ResidualStorage = Owned<f64, Dyn>;
     type JacobianStorage = Owned<f64, Dyn, Dyn>;
     type ParameterStorage = Owned<f64, Dyn>;

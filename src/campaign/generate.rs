@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
-use super::generator::{Generator, Selector, Settled, Unloaded, Work};
+use super::generator::{Generator, PreviousSettle, Selector, Unloaded, Work};
 use super::points::{BEAM_END_CLEARANCE_M, Campaign, Reason, Rejections};
 use super::region::RegionConfig;
 use super::sequence::Stop;
@@ -331,7 +331,7 @@ impl Generator<'_> {
         &self,
         planned: &[std::result::Result<Planned, Reason>],
         visit: impl Fn(&[f64]) -> Visit + Sync,
-    ) -> Result<Vec<Settled>> {
+    ) -> Result<Vec<PreviousSettle>> {
         let unloaded: Vec<Unloaded> = planned
             .par_iter()
             .map_init(

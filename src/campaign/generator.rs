@@ -36,7 +36,7 @@ pub trait Selector: Sync {
 /// Unloaded angles and link-length factor of a command, for the deflection solvers.
 pub(super) type Unloaded = Option<(Vec<f64>, f64)>;
 /// The settled arm and its link-length factor.
-pub(super) type Settled = Option<(Deflection, f64)>;
+pub(super) type PreviousSettle = Option<(Deflection, f64)>;
 
 /// Per-thread workspaces.
 pub(super) struct Work {
@@ -77,7 +77,7 @@ impl Generator<'_> {
         (state.q0.clone(), robot.length_scale(visit))
     }
 
-    pub(super) fn deflect_all(&self, unloaded: &[Unloaded]) -> Result<Vec<Settled>> {
+    pub(super) fn deflect_all(&self, unloaded: &[Unloaded]) -> Result<Vec<PreviousSettle>> {
         match self.world.deflection() {
             DeflectionSolver::FixedPoint => unloaded
                 .par_iter()

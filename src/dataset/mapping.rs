@@ -42,11 +42,13 @@ use nalgebra::{Point3, Quaternion, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 
 use super::orientation::Convention;
-use super::table::{self, Dialect, Table};
+use super::table::{self, CsvTable, Dialect};
 use super::{Dataset, ExtraInputs, Split};
 use crate::error::{Error, Result};
 use crate::robot::Chain;
 use crate::robot::chain::JointKind;
+
+pub use crate::robot::AngleUnit;
 
 /// A length unit of the file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -67,25 +69,6 @@ impl LengthUnit {
             LengthUnit::Cm => 1e-2,
             LengthUnit::Mm => 1e-3,
             LengthUnit::Um => 1e-6,
-        }
-    }
-}
-
-/// An angle unit of the file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AngleUnit {
-    #[default]
-    Rad,
-    Deg,
-}
-
-impl AngleUnit {
-    /// Radians per unit.
-    pub fn radians(self) -> f64 {
-        match self {
-            AngleUnit::Rad => 1.0,
-            AngleUnit::Deg => std::f64::consts::PI / 180.0,
         }
     }
 }
@@ -341,14 +324,14 @@ impl ColumnMapping {
         Ok((ids, q))
     }
 
-    fn table(&self, path: &Path, origin: &str) -> Result<Table> {
+    fn table(&self, path: &Path, origin: &str) -> Result<CsvTable> {
         let err = |message: String| Error::Data {
             origin: origin.to_string(),
             message,
         };
         self.check().map_err(err)?;
         let file = std::fs::File::open(path).map_err(|e| err(format!("cannot read: {e}")))?;
-        Table::load(
+        CsvTable::load(
             file,
             origin,
             Dialect::mapped(
@@ -361,7 +344,7 @@ impl ColumnMapping {
     /// The column of every joint and its scale to radians (metres for a prismatic joint).
     fn joint_columns(
         &self,
-        table: &Table,
+        table: &CsvTable,
         joint_names: &[String],
         prismatic: &[bool],
     ) -> Result<(Vec<usize>, Vec<f64>)> {
@@ -407,7 +390,7 @@ impl ColumnMapping {
         };
         self.check().map_err(err)?;
         let decimal = self.decimal_char().map_err(err)?;
-        let table = Table::load(
+        let table = CsvTable::load(
             reader,
             origin,
             Dialect::mapped(self.delimiter_byte().map_err(err)?, decimal),
@@ -438,7 +421,7 @@ impl ColumnMapping {
 
     /// The file's columns this mapping names, each found in `table`'s header (an error names the first one
     /// missing); the joints are `chain`'s, named `joint_names`.
-    fn columns(&self, table: &Table, chain: &Chain, joint_names: &[String]) -> Result<Columns> {
+    fn columns(&self, table: &CsvTable, chain: &Chain, joint_names: &[String]) -> Result<Columns> {
         let prismatic: Vec<bool> = chain
             .joints
             .iter()
@@ -507,7 +490,7 @@ impl ColumnMapping {
 
     /// Every row of `table` read through `columns`, in metres and radians; an error names the first faulty
     /// cell.
-    fn rows(&self, table: &Table, columns: &Columns) -> Result<Rows> {
+    fn rows(&self, table: &CsvTable, columns: &Columns) -> Result<Rows> {
         let n = table.rows.len();
         let mut rows = Rows {
             q: Vec::with_capacity(n),
@@ -551,7 +534,7 @@ impl ColumnMapping {
     }
 
     /// The measured point of row `r`: the position columns plus the signed difference, if mapped (metres).
-    fn position_at(&self, table: &Table, columns: &Columns, r: usize) -> Result<Point3<f64>> {
+    fn position_at(&self, table: &CsvTable, columns: &Columns, r: usize) -> Result<Point3<f64>> {
         let length = self.position.unit.metres();
         let mut p = columns
             .position
@@ -595,7 +578,7 @@ struct Rows {
 /// The orientation of row `r` read through `(convention, scale, cols)`; an error for a quaternion that is not
 /// of unit norm.
 fn rotation_at(
-    table: &Table,
+    table: &CsvTable,
     (convention, scale, cols): &(Convention, f64, Vec<usize>),
     r: usize,
 ) -> Result<UnitQuaternion<f64>> {
@@ -618,7 +601,7 @@ fn rotation_at(
 /// The point id of row `r` in column `c`: not empty, and not a repeat of an earlier row's (`seen` maps the ids
 /// read so far to their rows).
 fn point_id(
-    table: &Table,
+    table: &CsvTable,
     r: usize,
     c: usize,
     seen: &mut HashMap<String, usize>,

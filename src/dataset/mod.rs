@@ -27,7 +27,7 @@ mod truth_table;
 pub use split::{Split, random_split, random_train_val};
 pub use truth_table::TruthTable;
 
-use table::{Dialect, Table, open};
+use table::{CsvTable, Dialect, open};
 
 /// The controller's nominal flange pose: position (m) and unit quaternion, base frame.
 pub const FLANGE_COLUMNS: [&str; 7] = [
@@ -112,7 +112,7 @@ impl Dataset {
         origin: &str,
         joint_names: &[String],
     ) -> Result<Dataset> {
-        let table = Table::load(reader, origin, Dialect::PLAIN)?;
+        let table = CsvTable::load(reader, origin, Dialect::PLAIN)?;
         let joints = table.joint_columns(joint_names)?;
         let measured_cols = table.reflectors("")?.ok_or_else(|| {
             let missing = ["x1", "y1", "z1"]
@@ -315,7 +315,7 @@ pub fn joints_from_reader(
     origin: &str,
     joint_names: &[String],
 ) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
-    let table = Table::load(reader, origin, Dialect::PLAIN)?;
+    let table = CsvTable::load(reader, origin, Dialect::PLAIN)?;
     let joints = table.joint_columns(joint_names)?;
     let q = (0..table.rows.len())
         .map(|r| table.numbers(r, &joints))
@@ -325,7 +325,7 @@ pub fn joints_from_reader(
 
 /// How the campaign files lay out their columns: the robot's joints by name, reflector groups
 /// `{prefix}x1…z3`, a pose as `x, y, z, qw, qx, qy, qz`, and the `point_id` column.
-impl Table {
+impl CsvTable {
     /// The column of each joint, or an error naming the first one missing and what the header has.
     fn joint_columns(&self, joint_names: &[String]) -> Result<Vec<usize>> {
         joint_names

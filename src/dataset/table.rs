@@ -59,7 +59,7 @@ impl Dialect {
 }
 
 /// A delimited file held in memory, every row of the header's length.
-pub(super) struct Table {
+pub(super) struct CsvTable {
     pub(super) origin: String,
     pub(super) headers: Vec<String>,
     pub(super) index: HashMap<String, usize>,
@@ -67,12 +67,12 @@ pub(super) struct Table {
     pub(super) dialect: Dialect,
 }
 
-impl Table {
+impl CsvTable {
     pub(super) fn load(
         reader: impl std::io::Read,
         origin: &str,
         dialect: Dialect,
-    ) -> Result<Table> {
+    ) -> Result<CsvTable> {
         let err = |message: String| Error::Data {
             origin: origin.to_string(),
             message,
@@ -145,7 +145,7 @@ impl Table {
         if rows.is_empty() {
             return Err(err("no data rows after the header".into()));
         }
-        Ok(Table {
+        Ok(CsvTable {
             origin: origin.to_string(),
             headers,
             index,

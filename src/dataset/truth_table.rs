@@ -6,7 +6,7 @@ use std::path::Path;
 use nalgebra::Point3;
 
 use super::Dataset;
-use super::table::{Dialect, Table, open};
+use super::table::{CsvTable, Dialect, open};
 use crate::error::{Error, Result};
 
 /// What only the simulation knows about each point, for the evaluation.
@@ -30,7 +30,7 @@ impl TruthTable {
 
     /// Reads truth CSV text from `reader`; `origin` names it in messages.
     pub fn from_reader(reader: impl std::io::Read, origin: &str) -> Result<TruthTable> {
-        let table = Table::load(reader, origin, Dialect::PLAIN)?;
+        let table = CsvTable::load(reader, origin, Dialect::PLAIN)?;
         let required = |prefix: &str| -> Result<Vec<[usize; 3]>> {
             table.reflectors(prefix)?.ok_or_else(|| {
                 table.error(format!(

@@ -34,7 +34,7 @@ const SCALE_SAMPLES: usize = 200;
 /// Fixed, so the scaling is a property of the robot and the model alone.
 const SCALE_SEED: u64 = 0x0b5e_7ab1;
 
-enum Basis<'a> {
+enum JacobianSource<'a> {
     Kinematic(Box<Identification<'a>>),
     Paper {
         dh: &'a DhChain,
@@ -49,7 +49,7 @@ pub struct DesignModel<'a> {
     pub method: MethodKind,
     names: Vec<String>,
     scale: Vec<f64>,
-    basis: Basis<'a>,
+    basis: JacobianSource<'a>,
 }
 
 impl<'a> DesignModel<'a> {
@@ -81,7 +81,7 @@ impl<'a> DesignModel<'a> {
             let all = select_params(ctx.dh, &lower, &upper, kind).position;
             let reference = reference_configurations(ctx);
             let j = error_rows(ctx.dh, &as_slices(&reference), &mount, &all);
-            Basis::Paper {
+            JacobianSource::Paper {
                 dh: ctx.dh,
                 params: independent_columns(&j)
                     .into_iter()
@@ -94,9 +94,9 @@ impl<'a> DesignModel<'a> {
         let basis = match info.parameters {
             RobotParameters::None => return Ok(None),
             RobotParameters::ErrorModel(kind) => paper(kind),
-            RobotParameters::Identification { elastic } => {
-                Basis::Kinematic(Box::new(Identification::new(elastic, ctx, mount, length)?))
-            }
+            RobotParameters::Identification { elastic } => JacobianSource::Kinematic(Box::new(
+                Identification::new(elastic, ctx, mount, length)?,
+            )),
         };
         // A hybrid's parameters are its base's.
         let method = match info.base {
@@ -106,8 +106,8 @@ impl<'a> DesignModel<'a> {
             None => method,
         };
         let names = match &basis {
-            Basis::Kinematic(id) => id.params().iter().map(|p| p.name()).collect(),
-            Basis::Paper { params, .. } => params.iter().map(|p| p.name()).collect(),
+            JacobianSource::Kinematic(id) => id.params().iter().map(|p| p.name()).collect(),
+            JacobianSource::Paper { params, .. } => params.iter().map(|p| p.name()).collect(),
         };
         let mut model = DesignModel {
             method,
@@ -127,8 +127,8 @@ impl<'a> DesignModel<'a> {
     /// Rows a configuration adds: 3 for a point, 6 with a nest's orientation.
     pub fn rows_per_point(&self) -> usize {
         match &self.basis {
-            Basis::Kinematic(id) => id.rows_per_point(),
-            Basis::Paper { .. } => 3,
+            JacobianSource::Kinematic(id) => id.rows_per_point(),
+            JacobianSource::Paper { .. } => 3,
         }
     }
 
@@ -143,8 +143,8 @@ impl<'a> DesignModel<'a> {
 
     fn raw(&self, qs: &[&[f64]]) -> DMatrix<f64> {
         match &self.basis {
-            Basis::Kinematic(id) => id.jacobian(qs),
-            Basis::Paper { dh, params, point } => error_rows(dh, qs, point, params),
+            JacobianSource::Kinematic(id) => id.jacobian(qs),
+            JacobianSource::Paper { dh, params, point } => error_rows(dh, qs, point, params),
         }
     }
 

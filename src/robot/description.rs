@@ -20,7 +20,7 @@
 use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::chain::{Body, Chain, Inertial, Joint, JointKind};
 use super::plausible::{MAX_MASS_KG, bounded, length, non_negative};
@@ -86,17 +86,28 @@ pub fn load(path: impl AsRef<Path>, flange_link: Option<&str>) -> Result<Chain> 
 
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
-enum Convention {
+enum DhConvention {
     Dh,
     ModifiedDh,
 }
 
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+/// The unit of angles in a file: a DH table's, a tracker export's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-enum AngleUnit {
+pub enum AngleUnit {
     #[default]
     Rad,
     Deg,
+}
+
+impl AngleUnit {
+    /// Radians per unit.
+    pub fn radians(self) -> f64 {
+        match self {
+            AngleUnit::Rad => 1.0,
+            AngleUnit::Deg => std::f64::consts::PI / 180.0,
+        }
+    }
 }
 
 /// A fixed frame: translation (m) and fixed-axis roll, pitch, yaw (the table's angle unit), as a URDF origin.
@@ -111,7 +122,7 @@ struct Frame {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct Row {
+struct JointRow {
     name: String,
     /// m
     a: f64,
@@ -144,7 +155,7 @@ struct Row {
 #[serde(deny_unknown_fields)]
 struct Description {
     name: String,
-    convention: Convention,
+    convention: DhConvention,
     #[serde(default)]
     angle_unit: AngleUnit,
     /// The arm's base in the robot's base frame (default identity).
@@ -153,7 +164,7 @@ struct Description {
     /// The flange in the last DH frame (default identity).
     #[serde(default)]
     tool: Frame,
-    joints: Vec<Row>,
+    joints: Vec<JointRow>,
 }
 
 /// The chain a DH description in TOML text gives; `origin` names the text in messages.
@@ -278,10 +289,7 @@ impl Description {
 
     fn chain(&self) -> Result<Chain> {
         self.check()?;
-        let unit = match self.angle_unit {
-            AngleUnit::Rad => 1.0,
-            AngleUnit::Deg => std::f64::consts::PI / 180.0,
-        };
+        let unit = self.angle_unit.radians();
         let n = self.joints.len();
         let mut joints = Vec::with_capacity(n);
         let mut bodies = vec![Body {
@@ -295,8 +303,8 @@ impl Description {
             let (alpha, offset) = (r.alpha * unit, r.theta_offset * unit);
             // Joint frame (= link frame at q = 0) in the previous link's frame, and DH frame i in the link frame.
             let (origin, dh_frame) = match self.convention {
-                Convention::Dh => (before * tz(r.d) * rz(offset), tx(r.a) * rx(alpha)),
-                Convention::ModifiedDh => (
+                DhConvention::Dh => (before * tz(r.d) * rz(offset), tx(r.a) * rx(alpha)),
+                DhConvention::ModifiedDh => (
                     before * rx(alpha) * tx(r.a) * tz(r.d) * rz(offset),
                     Isometry3::identity(),
                 ),
@@ -332,8 +340,8 @@ impl Description {
                 colliders: Vec::new(),
             });
             before = match self.convention {
-                Convention::Dh => dh_frame,
-                Convention::ModifiedDh => Isometry3::identity(),
+                DhConvention::Dh => dh_frame,
+                DhConvention::ModifiedDh => Isometry3::identity(),
             };
         }
         Ok(Chain {

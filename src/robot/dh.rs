@@ -54,13 +54,13 @@ const COINCIDENT: f64 = 1e-12;
 const TIE: f64 = 1e-9;
 
 /// A DH frame under construction, in world coordinates.
-struct Axes {
+struct FrameAxes {
     origin: Point3<f64>,
     x: Vector3<f64>,
     z: Vector3<f64>,
 }
 
-impl Axes {
+impl FrameAxes {
     fn pose(&self) -> Isometry3<f64> {
         let y = self.z.cross(&self.x);
         let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[self.x, y, self.z]));
@@ -105,10 +105,10 @@ impl DhChain {
             return Err(invalid("non-finite base or flange pose".into()));
         }
 
-        let mut axes: Vec<Axes> = Vec::with_capacity(n + 1);
+        let mut axes: Vec<FrameAxes> = Vec::with_capacity(n + 1);
         let (p, u) = lines[0];
         let base_origin = Point3::from(chain.base.translation.vector);
-        axes.push(Axes {
+        axes.push(FrameAxes {
             origin: p + u * (base_origin - p).dot(&u),
             x: perpendicular(&u, &chain.base.rotation),
             z: u,
@@ -136,11 +136,11 @@ impl DhChain {
                 (p + v * t, cross / sin)
             };
             let x = orient(normal, &prev.x, &prev.z);
-            axes.push(Axes { origin, x, z: v });
+            axes.push(FrameAxes { origin, x, z: v });
         }
         let (p, u) = lines[n - 1];
         let flange_origin = Point3::from(fk.flange.translation.vector);
-        axes.push(Axes {
+        axes.push(FrameAxes {
             origin: p + u * (flange_origin - p).dot(&u),
             x: perpendicular(&u, &fk.flange.rotation),
             z: u,

@@ -14,6 +14,6 @@ pub mod plausible;
 pub mod urdf;
 
 pub use chain::{Body, Chain, Collider, Inertial, Joint, JointKind, Payload, Shape};
-pub use description::load;
+pub use description::{AngleUnit, load};
 pub use inverse_dynamics::JointRates;
 pub use kinematics::{Frames, flange_pose, forward_kinematics, point_jacobian};
