@@ -38,22 +38,35 @@ fn micro(x_m: f64) -> String {
     format!("{}", rounded(x_m * 1e6, 2))
 }
 
+/// "The scenario": the simulated world (robot, tracker, regions), then what the study varies and how it judges.
 fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
+    let _ = writeln!(out, "### The scenario\n");
+    out.push_str(&robot_in_words(study));
+    out.push_str(&tracker_in_words(study));
+    out.push_str(&regions_in_words(study));
+    out.push_str(&study_in_words(study, a));
+    let _ = writeln!(
+        out,
+        "*Ground-truth mean*: the mean distance (mm) between where a method predicts the reflector and where it \
+         truly is, over the noise-free grid — what a user of the calibrated robot gets. *Test*: the same against \
+         tracker measurements of the test points (noise included). Medians over the successful seeds; \
+         [q1–q3] is the interquartile range.\n"
+    );
+}
+
+/// The robot's line: its URDF, payload and how the true robot departs from the nominal model.
+fn robot_in_words(study: &StudyResult) -> String {
     let s = &study.world;
-    let c = &study.config;
     let robot = s.robot.urdf.file_stem().map_or_else(
         || s.robot.urdf.display().to_string(),
         |x| x.to_string_lossy().into_owned(),
     );
     let t = &s.truth;
-    let k = &s.tracker;
-    let _ = writeln!(out, "### The scenario\n");
-    let _ = writeln!(
-        out,
+    format!(
         "- **Robot:** `{robot}` (`{}`), carrying {} kg on the flange. The true robot differs from its nominal \
          model by joint-frame offsets of σ {} µm and {} µrad per axis, joint zero offsets of σ {} µrad, \
          joint compliance ({} Nm/rad, {} % scatter), gear errors of {} µrad and a repeatability of σ {} µrad per \
-         joint.",
+         joint.\n",
         s.robot.urdf.display(),
         s.robot.payload_kg,
         micro(t.frame_translation_m),
@@ -63,12 +76,17 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         rounded(t.stiffness_spread * 100.0, 2),
         micro(t.gear_amplitude_rad),
         micro(t.repeatability_rad),
-    );
+    )
+}
+
+/// The tracker's line: where it stands, its noise, and what its reflectors let it measure.
+fn tracker_in_words(study: &StudyResult) -> String {
+    let s = &study.world;
+    let k = &s.tracker;
     let reflectors = s.reflectors.nominal_m.len();
-    let _ = writeln!(
-        out,
+    format!(
         "- **Tracker:** at ({}, {}, {}) mm in the robot's base frame; noise σ {} µm + {} µm/m in range and {} µrad \
-         per angle. {}",
+         per angle. {}\n",
         rounded(k.position_m[0] * 1e3, 1),
         rounded(k.position_m[1] * 1e3, 1),
         rounded(k.position_m[2] * 1e3, 1),
@@ -82,7 +100,12 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         } else {
             format!("{reflectors} reflectors; positions only.")
         },
-    );
+    )
+}
+
+/// One line per region: its box and the tool's tilt and turn.
+fn regions_in_words(study: &StudyResult) -> String {
+    let mut out = String::new();
     for r in &study.regions {
         let _ = writeln!(
             out,
@@ -99,6 +122,13 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
             r.spin_deg,
         );
     }
+    out
+}
+
+/// What the study varies (training sets, methods) and judges them on, and how its runs went.
+fn study_in_words(study: &StudyResult, a: &Axes) -> String {
+    let c = &study.config;
+    let mut out = String::new();
     let layouts: Vec<&str> = a.distributions.iter().map(|d| d.name()).collect();
     let _ = writeln!(
         out,
@@ -139,13 +169,7 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         failed
     );
     let _ = writeln!(out, "- **Worse than nominal:** {}\n", worse_in_words(study));
-    let _ = writeln!(
-        out,
-        "*Ground-truth mean*: the mean distance (mm) between where a method predicts the reflector and where it \
-         truly is, over the noise-free grid — what a user of the calibrated robot gets. *Test*: the same against \
-         tracker measurements of the test points (noise included). Medians over the successful seeds; \
-         [q1–q3] is the interquartile range.\n"
-    );
+    out
 }
 
 /// The runs whose calibration leaves the arm worse than the nominal model on the same campaign (ground-truth
