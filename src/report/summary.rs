@@ -440,6 +440,28 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
     }
 }
 
+/// A study's `summary.md`, rendered. The recording shows it as a document, so [`super::recording::record`] takes
+/// a `Summary` rather than any text: only [`Summary::of`] makes one, and a recording cannot be made before its
+/// study's summary exists.
+pub struct Summary(String);
+
+impl Summary {
+    /// Renders the study's `summary.md` ([`summary_md`]).
+    pub fn of(study: &StudyResult) -> Result<Summary> {
+        summary_md(study).map(Summary)
+    }
+
+    /// The markdown text.
+    pub fn markdown(&self) -> &str {
+        &self.0
+    }
+
+    /// The bytes of `summary.md`.
+    pub fn into_bytes(self) -> Vec<u8> {
+        self.0.into_bytes()
+    }
+}
+
 /// `summary.md`, top-down: the answer, the learning curves and a verdict per method, then the details (the
 /// scenario, the curves per layout, Table 1 at the largest size, runs made worse, accuracy outside the region,
 /// observability). Every number is an aggregate of `metrics.csv`'s written values.
