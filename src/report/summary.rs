@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::study::{RunMetrics, StudyResult};
 
 use super::aggregate::{
-    Axes, Curve, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
+    Axes, Curve, CurvePoint, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
 };
 use super::answer::{Answer, STATISTICS, answer_md, answers, fmt_target};
 use super::metrics::{rounded, worse_than_nominal};
@@ -254,13 +254,24 @@ fn verdict(
             fmt_mm(t)
         );
     }
+    let curve = curve_in_words(c, last, t);
+    let target = smallest_target_in_words(answers, region, method);
+    format!(
+        "**{method}**: {curve}{target}.{}{failures}",
+        layout_sentence(method, curves)
+    )
+}
+
+/// Where the best layout's curve `c` ends (`t` mm at `last`) and whether it still falls there: more points would
+/// help, or the model is the limit.
+fn curve_in_words(c: &Curve, last: &CurvePoint, t: f64) -> String {
     let previous = c
         .points
         .iter()
         .rev()
         .filter(|p| p.n_train < last.n_train)
         .find_map(|p| p.truth.map(|s| (p.n_train, s.median)));
-    let curve = match previous {
+    match previous {
         Some((n0, t0)) if t0 > (1.0 + PLATEAU_TOLERANCE) * t => format!(
             "still improving at {} points with {} — {} mm, down from {} mm at {n0}; more points would help",
             last.n_train,
@@ -276,13 +287,18 @@ fn verdict(
             PLATEAU_TOLERANCE * 100.0,
             plateau_from(&c.points).map_or("—".to_string(), |n| n.to_string()),
         ),
-    };
+    }
+}
+
+/// The smallest target on the ground-truth mean that `method` reaches in `region`, from how many points with
+/// which layout; or that it reaches none.
+fn smallest_target_in_words(answers: &[Answer], region: &str, method: MethodKind) -> String {
     let reached = answers
         .iter()
         .filter(|x| x.region == region && x.statistic == STATISTICS[0].0)
         .filter_map(|x| Some((x.target_mm, x.best_of(method)?)))
         .min_by(|a, b| a.0.total_cmp(&b.0));
-    let target = match reached {
+    match reached {
         Some((target, cell)) => format!(
             "; its smallest target reached is {} mm (mean), from {} points with {}",
             fmt_target(target),
@@ -290,11 +306,7 @@ fn verdict(
             cell.distribution.name()
         ),
         None => "; it reaches none of the targets".to_string(),
-    };
-    format!(
-        "**{method}**: {curve}{target}.{}{failures}",
-        layout_sentence(method, curves)
-    )
+    }
 }
 
 /// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
