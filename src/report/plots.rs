@@ -19,6 +19,7 @@ use plotters::style::{FontStyle, register_font};
 use crate::calib::registry::MethodKind;
 use crate::error::{Error, Result};
 use crate::report::aggregate::{Curve, axes, floor_spread, learning_curves};
+use crate::report::trajectory::Comparison;
 use crate::study::StudyResult;
 
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
@@ -529,76 +530,92 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
             for (whole, &n) in root.split_evenly((1, sizes.len())).iter().zip(&sizes) {
                 // The legend in a column of its own, right of the plot, so it hides no line.
                 let (panel, legend) = whole.split_horizontally(pw - TRACKER_LEGEND_WIDTH);
-                let panel = &panel;
-                let lines: Vec<MethodLine> = rows
-                    .iter()
-                    .filter(|r| r.region == region && r.n_targets == n)
-                    .map(|r| {
-                        let mut pts: Vec<(f64, f64)> = std::iter::once(r.stop)
-                            .chain(r.speeds.iter().map(|(_, m)| *m))
-                            .filter_map(|m| Some((m.tracker_s? / 60.0, m.mean_mm?)))
-                            .filter(|p| p.0 > 0.0 && p.1.is_finite())
-                            .collect();
-                        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        let i = super::trajectory::method_index(study, r.method);
-                        (i, r.label(), r.motion_inputs, pts)
-                    })
-                    .collect();
-                let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.3.clone()).collect();
-                if all.is_empty() {
-                    panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
-                    continue;
-                }
-                let mut xs: Vec<f64> = all.iter().map(|p| p.0).collect();
-                let (x0, x1) = min_max(&xs);
-                xs.sort_by(f64::total_cmp);
-                xs.dedup_by(|a, b| (*a - *b).abs() < 0.05 * *b);
-                let (_, y1) = min_max(&all.iter().map(|p| p.1).collect::<Vec<_>>());
-                let mut chart = ChartBuilder::on(panel)
-                    .caption(
-                        format!("region {region}, {n} targets: accuracy against tracker time"),
-                        (FAMILY, 24),
-                    )
-                    .margin(16)
-                    .x_label_area_size(56)
-                    .y_label_area_size(86)
-                    .build_cartesian_2d(
-                        (x0 / 1.3..x1 * 1.3).log_scale().with_key_points(xs),
-                        0.0..y1 * 1.1,
-                    )?;
-                chart
-                    .configure_mesh()
-                    .x_desc("tracker time (min, log scale); rightmost point: stop and go")
-                    .y_desc("ground-truth mean error (mm)")
-                    .x_label_formatter(&|x| format!("{x:.1}"))
-                    .y_label_formatter(&|y| format!("{y:.2}"))
-                    .label_style((FAMILY, 17))
-                    .axis_desc_style((FAMILY, 19))
-                    .light_line_style(RGBColor(235, 235, 235))
-                    .draw()?;
-                let mut entries = Vec::new();
-                for (i, label, dash, pts) in &lines {
-                    let c = colour(*i);
-                    // Fitted with the motion as inputs: dashed, in its method's colour.
-                    let dash = *dash;
-                    if dash {
-                        chart.draw_series(DashedLineSeries::new(
-                            pts.clone(),
-                            10,
-                            6,
-                            c.stroke_width(2),
-                        ))?;
-                    } else {
-                        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
-                    }
-                    chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
-                    entries.push((label.clone(), c, 2, dash));
-                }
-                draw_legend(&legend, entries)?;
+                let lines = method_lines(study, &rows, region, n);
+                tracker_time_panel(&panel, &legend, region, n, &lines)?;
             }
             Ok(())
         })?;
         out.push((name, png));
     }
     Ok(out)
+}
+
+/// The lines of one panel of the tracker-time plot: per method of `region` through `n` targets, its
+/// (tracker minutes, mean mm) points, stop and go and each speed, by increasing time.
+fn method_lines(
+    study: &StudyResult,
+    rows: &[Comparison],
+    region: &str,
+    n: usize,
+) -> Vec<MethodLine> {
+    rows.iter()
+        .filter(|r| r.region == region && r.n_targets == n)
+        .map(|r| {
+            let mut pts: Vec<(f64, f64)> = std::iter::once(r.stop)
+                .chain(r.speeds.iter().map(|(_, m)| *m))
+                .filter_map(|m| Some((m.tracker_s? / 60.0, m.mean_mm?)))
+                .filter(|p| p.0 > 0.0 && p.1.is_finite())
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let i = super::trajectory::method_index(study, r.method);
+            (i, r.label(), r.motion_inputs, pts)
+        })
+        .collect()
+}
+
+/// One panel of the tracker-time plot: the mean against the tracker time (log scale), a line per method, its
+/// legend in `legend`.
+fn tracker_time_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    legend: &DrawingArea<BitMapBackend, Shift>,
+    region: &str,
+    n: usize,
+    lines: &[MethodLine],
+) -> Drawn {
+    let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.3.clone()).collect();
+    if all.is_empty() {
+        panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
+        return Ok(());
+    }
+    let mut xs: Vec<f64> = all.iter().map(|p| p.0).collect();
+    let (x0, x1) = min_max(&xs);
+    xs.sort_by(f64::total_cmp);
+    xs.dedup_by(|a, b| (*a - *b).abs() < 0.05 * *b);
+    let (_, y1) = min_max(&all.iter().map(|p| p.1).collect::<Vec<_>>());
+    let mut chart = ChartBuilder::on(panel)
+        .caption(
+            format!("region {region}, {n} targets: accuracy against tracker time"),
+            (FAMILY, 24),
+        )
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(86)
+        .build_cartesian_2d(
+            (x0 / 1.3..x1 * 1.3).log_scale().with_key_points(xs),
+            0.0..y1 * 1.1,
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("tracker time (min, log scale); rightmost point: stop and go")
+        .y_desc("ground-truth mean error (mm)")
+        .x_label_formatter(&|x| format!("{x:.1}"))
+        .y_label_formatter(&|y| format!("{y:.2}"))
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let mut entries = Vec::new();
+    for (i, label, dash, pts) in lines {
+        let c = colour(*i);
+        // Fitted with the motion as inputs: dashed, in its method's colour.
+        let dash = *dash;
+        if dash {
+            chart.draw_series(DashedLineSeries::new(pts.clone(), 10, 6, c.stroke_width(2)))?;
+        } else {
+            chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
+        }
+        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
+        entries.push((label.clone(), c, 2, dash));
+    }
+    draw_legend(legend, entries)
 }
