@@ -7,6 +7,7 @@ use calibench::calib::registry::MethodKind;
 use calibench::campaign::DistributionKind;
 use calibench::eval::Stats;
 use calibench::report::recording::{self, arrow_factor};
+use calibench::report::summary::Summary;
 use calibench::robot::{Chain, flange_pose, urdf};
 use calibench::scenario::Scenario;
 use calibench::study::{
@@ -248,7 +249,8 @@ fn assert_has(entity: &Entity, path: &str, components: &[&str]) {
 fn recording_holds_the_documented_entities() {
     let chain = chain();
     let study = study(&chain);
-    let bytes = recording::record(&study, &chain, "# Summary\n\nA test.\n").expect("recording");
+    let bytes = recording::record(&study, &chain, &Summary::of(&study).expect("summary"))
+        .expect("recording");
     assert!(bytes.len() > 1000, "recording of {} bytes", bytes.len());
     eprintln!("recording: {} bytes", bytes.len());
     if let Ok(path) = std::env::var("CALIBENCH_RRD_OUT") {
@@ -500,9 +502,15 @@ where
 fn recording_opens_on_a_designed_blueprint_and_is_named_after_the_scenario() {
     let chain = chain();
     let study = study(&chain);
-    let bytes = recording::record(&study, &chain, "# Summary").expect("recording");
+    let summary = Summary::of(&study).expect("summary");
+    let bytes = recording::record(&study, &chain, &summary).expect("recording");
     let (data, blueprint, activated) = stores(&bytes);
     assert!(activated, "the blueprint is made active");
+
+    // The summary document is the study's summary.md, word for word.
+    let shown =
+        texts::<rerun::components::Text>(&data, "summary", rerun::TextDocument::descriptor_text());
+    assert_eq!(shown, [summary.markdown()]);
 
     // The recording's name.
     let names: Vec<String> = data
@@ -725,7 +733,8 @@ fn recording_shows_the_trajectory_and_the_tracker_time_comparison() {
         n_targets: n,
         samples,
     });
-    let bytes = recording::record(&study, &chain, "# Summary\n").expect("recording");
+    let bytes = recording::record(&study, &chain, &Summary::of(&study).expect("summary"))
+        .expect("recording");
     let entities = decode(&bytes);
 
     let path = entity(&entities, "world/trajectory/path");

@@ -23,7 +23,8 @@ use crate::study::StudyResult;
 /// `answer.csv`,
 /// the plots, `campaign.rrd` (the robot drawn from `chain`) and `summary.md`.
 pub fn study_files(study: &StudyResult, chain: &Chain) -> Result<Vec<(String, Vec<u8>)>> {
-    let summary = summary::summary_md(study)?;
+    // Rendered first: the recording shows it (`recording::record` takes it).
+    let summary = summary::Summary::of(study)?;
     let mut files = vec![
         ("metrics.csv".to_string(), metrics::metrics_csv(study)?),
         ("outside.csv".to_string(), metrics::outside_csv(study)?),

@@ -11,12 +11,15 @@ use std::sync::OnceLock;
 use image::ImageEncoder;
 
 use plotters::coord::Shift;
+use plotters::coord::cartesian::Cartesian2d;
+use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
 use crate::calib::registry::MethodKind;
 use crate::error::{Error, Result};
 use crate::report::aggregate::{Curve, axes, floor_spread, learning_curves};
+use crate::report::trajectory::Comparison;
 use crate::study::StudyResult;
 
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
@@ -185,6 +188,15 @@ fn line(points: &[(i32, i32)], style: ShapeStyle, dash: bool) -> Vec<PathElement
     out
 }
 
+/// The chart of a learning-curve panel: log axes, ticks at the training-set sizes and at 1, 2, 5 × 10^k mm.
+type LogChart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<WithKeyPoints<LogCoord<f64>>, WithKeyPoints<LogCoord<f64>>>,
+>;
+
+/// One learning-curve panel: each method's median with its interquartile band, the floor dashed, the legend
+/// in a column of its own.
 fn learning_panel(
     whole: &DrawingArea<BitMapBackend, Shift>,
     title: &str,
@@ -193,103 +205,21 @@ fn learning_panel(
 ) -> Drawn {
     let (width, _) = whole.dim_in_pixel();
     let (panel, legend) = whole.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
-    let mut xs: Vec<f64> = Vec::new();
-    let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
-    for (_, c) in curves {
-        for p in &c.points {
-            if let Some(s) = p.truth {
-                xs.push(p.n_train as f64);
-                ys.extend([s.q1, s.median, s.q3]);
-            }
-        }
-    }
-    xs.extend(floor.iter().map(|p| p.0));
-    ys.retain(|y| y.is_finite() && *y > 0.0);
-    xs.retain(|x| *x > 0.0);
-    if xs.is_empty() || ys.is_empty() {
+    let Some((xs, ys)) = plotted_values(curves, floor) else {
         whole.titled(&format!("{title}: no successful run"), (FAMILY, 26))?;
         return Ok(());
-    }
+    };
     let (x0, x1) = min_max(&xs);
     let (y0, y1) = min_max(&ys);
-    let (ylo, yhi) = (y0 / 1.3, y1 * 2.5);
-    // Ticks: the training-set sizes on x; 1, 2, 5 × 10^k on y (every digit as a light line).
-    let mut sizes: Vec<f64> = xs.clone();
-    sizes.sort_by(f64::total_cmp);
-    sizes.dedup();
-    let decades = (ylo.log10().floor() as i32)..=(yhi.log10().ceil() as i32);
-    let ticks = |digits: &[f64]| -> Vec<f64> {
-        decades
-            .clone()
-            .flat_map(|k| digits.iter().map(move |d| d * 10f64.powi(k)))
-            .filter(|y| (ylo..=yhi).contains(y))
-            .collect()
-    };
-    let bold = ticks(&[1.0, 2.0, 5.0]);
-    let light = ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
-    let mut chart = ChartBuilder::on(&panel)
-        .caption(title, (FAMILY, 26))
-        .margin(16)
-        .x_label_area_size(56)
-        .y_label_area_size(86)
-        .build_cartesian_2d(
-            (x0 / 1.25..x1 * 1.25).log_scale().with_key_points(sizes),
-            (ylo..yhi)
-                .log_scale()
-                .with_key_points(bold)
-                .with_light_points(light),
-        )?;
-    chart
-        .configure_mesh()
-        .x_desc("training points (log scale)")
-        .y_desc("ground-truth mean error (mm, log scale)")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| {
-            let decimals = (-y.log10().floor()).max(0.0) as usize;
-            format!("{y:.decimals$}")
-        })
-        .label_style((FAMILY, 17))
-        .axis_desc_style((FAMILY, 19))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()?;
+    let mut chart = log_chart(
+        &panel,
+        title,
+        &xs,
+        (x0 / 1.25, x1 * 1.25),
+        (y0 / 1.3, y1 * 2.5),
+    )?;
     for &(i, c) in curves {
-        let band: Vec<(f64, f64, f64, f64)> = c
-            .points
-            .iter()
-            .filter_map(|p| p.truth.map(|s| (p.n_train as f64, s.q1, s.median, s.q3)))
-            .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0)
-            .collect();
-        if band.is_empty() {
-            continue;
-        }
-        let col = colour(i);
-        if band.len() > 1 {
-            let polygon: Vec<(f64, f64)> = band
-                .iter()
-                .map(|p| (p.0, p.3))
-                .chain(band.iter().rev().map(|p| (p.0, p.1)))
-                .collect();
-            chart.draw_series(std::iter::once(Polygon::new(
-                polygon,
-                col.mix(0.15).filled(),
-            )))?;
-        } else {
-            let p = band[0];
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(p.0, p.1), (p.0, p.3)],
-                col.stroke_width(2),
-            )))?;
-        }
-        let median: Vec<(f64, f64)> = band.iter().map(|p| (p.0, p.2)).collect();
-        if dashed(c.method) {
-            chart.draw_series(DashedLineSeries::new(median, 10, 6, col.stroke_width(3)))?;
-        } else {
-            chart.draw_series(LineSeries::new(median, col.stroke_width(3)))?;
-        }
-        chart.draw_series(
-            band.iter()
-                .map(|p| Circle::new((p.0, p.2), 4, col.filled())),
-        )?;
+        draw_curve(&mut chart, c, colour(i))?;
     }
     if !floor.is_empty() {
         let line: Vec<(f64, f64)> = if floor.len() == 1 {
@@ -308,6 +238,120 @@ fn learning_panel(
         entries.push(("floor (oracle)".into(), BLACK, 2, true));
     }
     draw_legend(&legend, entries)
+}
+
+/// The sizes (x) and errors (y: quartiles and medians, the floor) a panel shows, positive ones only; `None` when
+/// there is nothing to draw on log axes.
+fn plotted_values(
+    curves: &[(usize, &Curve)],
+    floor: &[(f64, f64)],
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let mut xs: Vec<f64> = Vec::new();
+    let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
+    for (_, c) in curves {
+        for p in &c.points {
+            if let Some(s) = p.truth {
+                xs.push(p.n_train as f64);
+                ys.extend([s.q1, s.median, s.q3]);
+            }
+        }
+    }
+    xs.extend(floor.iter().map(|p| p.0));
+    ys.retain(|y| y.is_finite() && *y > 0.0);
+    xs.retain(|x| *x > 0.0);
+    (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+}
+
+/// The chart on `panel`, its mesh drawn: x over `x_range` with a tick at each of `xs`, y over `y_range`.
+fn log_chart<'a, 'b>(
+    panel: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    title: &str,
+    xs: &[f64],
+    x_range: (f64, f64),
+    (ylo, yhi): (f64, f64),
+) -> std::result::Result<LogChart<'a, 'b>, Box<dyn StdError>> {
+    // Ticks: the training-set sizes on x; 1, 2, 5 × 10^k on y (every digit as a light line).
+    let mut sizes: Vec<f64> = xs.to_vec();
+    sizes.sort_by(f64::total_cmp);
+    sizes.dedup();
+    let decades = (ylo.log10().floor() as i32)..=(yhi.log10().ceil() as i32);
+    let ticks = |digits: &[f64]| -> Vec<f64> {
+        decades
+            .clone()
+            .flat_map(|k| digits.iter().map(move |d| d * 10f64.powi(k)))
+            .filter(|y| (ylo..=yhi).contains(y))
+            .collect()
+    };
+    let bold = ticks(&[1.0, 2.0, 5.0]);
+    let light = ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    let mut chart = ChartBuilder::on(panel)
+        .caption(title, (FAMILY, 26))
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(86)
+        .build_cartesian_2d(
+            (x_range.0..x_range.1).log_scale().with_key_points(sizes),
+            (ylo..yhi)
+                .log_scale()
+                .with_key_points(bold)
+                .with_light_points(light),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("training points (log scale)")
+        .y_desc("ground-truth mean error (mm, log scale)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| {
+            let decimals = (-y.log10().floor()).max(0.0) as usize;
+            format!("{y:.decimals$}")
+        })
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    Ok(chart)
+}
+
+/// One method's curve: the interquartile band (a bar when there is a single size), the median line (dashed
+/// for a hybrid) and a dot at each size.
+fn draw_curve(chart: &mut LogChart, c: &Curve, col: RGBColor) -> Drawn {
+    let band: Vec<(f64, f64, f64, f64)> = c
+        .points
+        .iter()
+        .filter_map(|p| p.truth.map(|s| (p.n_train as f64, s.q1, s.median, s.q3)))
+        .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0)
+        .collect();
+    if band.is_empty() {
+        return Ok(());
+    }
+    if band.len() > 1 {
+        let polygon: Vec<(f64, f64)> = band
+            .iter()
+            .map(|p| (p.0, p.3))
+            .chain(band.iter().rev().map(|p| (p.0, p.1)))
+            .collect();
+        chart.draw_series(std::iter::once(Polygon::new(
+            polygon,
+            col.mix(0.15).filled(),
+        )))?;
+    } else {
+        let p = band[0];
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(p.0, p.1), (p.0, p.3)],
+            col.stroke_width(2),
+        )))?;
+    }
+    let median: Vec<(f64, f64)> = band.iter().map(|p| (p.0, p.2)).collect();
+    if dashed(c.method) {
+        chart.draw_series(DashedLineSeries::new(median, 10, 6, col.stroke_width(3)))?;
+    } else {
+        chart.draw_series(LineSeries::new(median, col.stroke_width(3)))?;
+    }
+    chart.draw_series(
+        band.iter()
+            .map(|p| Circle::new((p.0, p.2), 4, col.filled())),
+    )?;
+    Ok(())
 }
 
 /// A legend in its own area: per entry (label, colour, line width, dashed) a swatch drawn as its line is.
@@ -486,76 +530,92 @@ pub fn tracker_time_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
             for (whole, &n) in root.split_evenly((1, sizes.len())).iter().zip(&sizes) {
                 // The legend in a column of its own, right of the plot, so it hides no line.
                 let (panel, legend) = whole.split_horizontally(pw - TRACKER_LEGEND_WIDTH);
-                let panel = &panel;
-                let lines: Vec<MethodLine> = rows
-                    .iter()
-                    .filter(|r| r.region == region && r.n_targets == n)
-                    .map(|r| {
-                        let mut pts: Vec<(f64, f64)> = std::iter::once(r.stop)
-                            .chain(r.speeds.iter().map(|(_, m)| *m))
-                            .filter_map(|m| Some((m.tracker_s? / 60.0, m.mean_mm?)))
-                            .filter(|p| p.0 > 0.0 && p.1.is_finite())
-                            .collect();
-                        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        let i = super::trajectory::method_index(study, r.method);
-                        (i, r.label(), r.motion_inputs, pts)
-                    })
-                    .collect();
-                let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.3.clone()).collect();
-                if all.is_empty() {
-                    panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
-                    continue;
-                }
-                let mut xs: Vec<f64> = all.iter().map(|p| p.0).collect();
-                let (x0, x1) = min_max(&xs);
-                xs.sort_by(f64::total_cmp);
-                xs.dedup_by(|a, b| (*a - *b).abs() < 0.05 * *b);
-                let (_, y1) = min_max(&all.iter().map(|p| p.1).collect::<Vec<_>>());
-                let mut chart = ChartBuilder::on(panel)
-                    .caption(
-                        format!("region {region}, {n} targets: accuracy against tracker time"),
-                        (FAMILY, 24),
-                    )
-                    .margin(16)
-                    .x_label_area_size(56)
-                    .y_label_area_size(86)
-                    .build_cartesian_2d(
-                        (x0 / 1.3..x1 * 1.3).log_scale().with_key_points(xs),
-                        0.0..y1 * 1.1,
-                    )?;
-                chart
-                    .configure_mesh()
-                    .x_desc("tracker time (min, log scale); rightmost point: stop and go")
-                    .y_desc("ground-truth mean error (mm)")
-                    .x_label_formatter(&|x| format!("{x:.1}"))
-                    .y_label_formatter(&|y| format!("{y:.2}"))
-                    .label_style((FAMILY, 17))
-                    .axis_desc_style((FAMILY, 19))
-                    .light_line_style(RGBColor(235, 235, 235))
-                    .draw()?;
-                let mut entries = Vec::new();
-                for (i, label, dash, pts) in &lines {
-                    let c = colour(*i);
-                    // Fitted with the motion as inputs: dashed, in its method's colour.
-                    let dash = *dash;
-                    if dash {
-                        chart.draw_series(DashedLineSeries::new(
-                            pts.clone(),
-                            10,
-                            6,
-                            c.stroke_width(2),
-                        ))?;
-                    } else {
-                        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
-                    }
-                    chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
-                    entries.push((label.clone(), c, 2, dash));
-                }
-                draw_legend(&legend, entries)?;
+                let lines = method_lines(study, &rows, region, n);
+                tracker_time_panel(&panel, &legend, region, n, &lines)?;
             }
             Ok(())
         })?;
         out.push((name, png));
     }
     Ok(out)
+}
+
+/// The lines of one panel of the tracker-time plot: per method of `region` through `n` targets, its
+/// (tracker minutes, mean mm) points, stop and go and each speed, by increasing time.
+fn method_lines(
+    study: &StudyResult,
+    rows: &[Comparison],
+    region: &str,
+    n: usize,
+) -> Vec<MethodLine> {
+    rows.iter()
+        .filter(|r| r.region == region && r.n_targets == n)
+        .map(|r| {
+            let mut pts: Vec<(f64, f64)> = std::iter::once(r.stop)
+                .chain(r.speeds.iter().map(|(_, m)| *m))
+                .filter_map(|m| Some((m.tracker_s? / 60.0, m.mean_mm?)))
+                .filter(|p| p.0 > 0.0 && p.1.is_finite())
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let i = super::trajectory::method_index(study, r.method);
+            (i, r.label(), r.motion_inputs, pts)
+        })
+        .collect()
+}
+
+/// One panel of the tracker-time plot: the mean against the tracker time (log scale), a line per method, its
+/// legend in `legend`.
+fn tracker_time_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    legend: &DrawingArea<BitMapBackend, Shift>,
+    region: &str,
+    n: usize,
+    lines: &[MethodLine],
+) -> Drawn {
+    let all: Vec<(f64, f64)> = lines.iter().flat_map(|l| l.3.clone()).collect();
+    if all.is_empty() {
+        panel.titled(&format!("{n} targets: no successful run"), (FAMILY, 26))?;
+        return Ok(());
+    }
+    let mut xs: Vec<f64> = all.iter().map(|p| p.0).collect();
+    let (x0, x1) = min_max(&xs);
+    xs.sort_by(f64::total_cmp);
+    xs.dedup_by(|a, b| (*a - *b).abs() < 0.05 * *b);
+    let (_, y1) = min_max(&all.iter().map(|p| p.1).collect::<Vec<_>>());
+    let mut chart = ChartBuilder::on(panel)
+        .caption(
+            format!("region {region}, {n} targets: accuracy against tracker time"),
+            (FAMILY, 24),
+        )
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(86)
+        .build_cartesian_2d(
+            (x0 / 1.3..x1 * 1.3).log_scale().with_key_points(xs),
+            0.0..y1 * 1.1,
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("tracker time (min, log scale); rightmost point: stop and go")
+        .y_desc("ground-truth mean error (mm)")
+        .x_label_formatter(&|x| format!("{x:.1}"))
+        .y_label_formatter(&|y| format!("{y:.2}"))
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let mut entries = Vec::new();
+    for (i, label, dash, pts) in lines {
+        let c = colour(*i);
+        // Fitted with the motion as inputs: dashed, in its method's colour.
+        let dash = *dash;
+        if dash {
+            chart.draw_series(DashedLineSeries::new(pts.clone(), 10, 6, c.stroke_width(2)))?;
+        } else {
+            chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
+        }
+        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
+        entries.push((label.clone(), c, 2, dash));
+    }
+    draw_legend(legend, entries)
 }

@@ -82,6 +82,7 @@ pub use super::rerun_common::{
     N_TRAIN_LOG_TIMELINE, N_TRAIN_TIMELINE, POINT_TIMELINE, sanitize, viridis,
 };
 use super::rerun_common::{f3, nice_ceiling, p3, palette, rerun_error};
+use super::summary::Summary;
 
 /// The application id of every recording.
 pub const APPLICATION_ID: &str = "calibench";
@@ -98,9 +99,12 @@ const ARROW_TARGET_M: f64 = 0.1;
 
 /// The `.rrd` bytes of the study's recording (see the module documentation for what it holds).
 ///
+/// The recording shows the study's summary as its `summary` document, so it takes the rendered [`Summary`]
+/// (the one written as `summary.md`): the summary exists before the recording does.
+///
 /// The recording goes to an in-memory sink (`RecordingStreamBuilder::memory`) and is encoded at the end, so the
 /// caller writes the file atomically and a failed study leaves no partial recording behind.
-pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Result<Vec<u8>> {
+pub fn record(study: &StudyResult, chain: &Chain, summary: &Summary) -> Result<Vec<u8>> {
     let name = sanitize(&study.world.name);
     let (rec, storage) = RecordingStreamBuilder::new(APPLICATION_ID)
         .recording_id(format!("calibench-{name}"))
@@ -114,7 +118,7 @@ pub fn record(study: &StudyResult, chain: &Chain, summary_markdown: &str) -> Res
     rec.set_log_time_enabled(false);
     rec.set_log_tick_enabled(false);
 
-    log_all(&rec, study, chain, summary_markdown)?;
+    log_all(&rec, study, chain, summary)?;
     super::blueprint::send(
         &rec,
         APPLICATION_ID,
@@ -175,7 +179,12 @@ fn mm(m: f64) -> f64 {
     m * 1e3
 }
 
-fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &str) -> Result<()> {
+fn log_all(
+    rec: &RecordingStream,
+    study: &StudyResult,
+    chain: &Chain,
+    summary: &Summary,
+) -> Result<()> {
     rec.log_static("/", &ViewCoordinates::RIGHT_HAND_Z_UP())
         .map_err(rerun_error)?;
 
@@ -232,7 +241,7 @@ fn log_all(rec: &RecordingStream, study: &StudyResult, chain: &Chain, summary: &
     );
     rec.log_static("legend", &TextDocument::from_markdown(legend))
         .map_err(rerun_error)?;
-    rec.log_static("summary", &TextDocument::from_markdown(summary))
+    rec.log_static("summary", &TextDocument::from_markdown(summary.markdown()))
         .map_err(rerun_error)?;
     Ok(())
 }

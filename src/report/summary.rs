@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::study::{RunMetrics, StudyResult};
 
 use super::aggregate::{
-    Axes, Curve, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
+    Axes, Curve, CurvePoint, PLATEAU_TOLERANCE, axes, cell_spread, learning_curves, plateau_from,
 };
 use super::answer::{Answer, STATISTICS, answer_md, answers, fmt_target};
 use super::metrics::{rounded, worse_than_nominal};
@@ -38,22 +38,35 @@ fn micro(x_m: f64) -> String {
     format!("{}", rounded(x_m * 1e6, 2))
 }
 
+/// "The scenario": the simulated world (robot, tracker, regions), then what the study varies and how it judges.
 fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
+    let _ = writeln!(out, "### The scenario\n");
+    out.push_str(&robot_in_words(study));
+    out.push_str(&tracker_in_words(study));
+    out.push_str(&regions_in_words(study));
+    out.push_str(&study_in_words(study, a));
+    let _ = writeln!(
+        out,
+        "*Ground-truth mean*: the mean distance (mm) between where a method predicts the reflector and where it \
+         truly is, over the noise-free grid — what a user of the calibrated robot gets. *Test*: the same against \
+         tracker measurements of the test points (noise included). Medians over the successful seeds; \
+         [q1–q3] is the interquartile range.\n"
+    );
+}
+
+/// The robot's line: its URDF, payload and how the true robot departs from the nominal model.
+fn robot_in_words(study: &StudyResult) -> String {
     let s = &study.world;
-    let c = &study.config;
     let robot = s.robot.urdf.file_stem().map_or_else(
         || s.robot.urdf.display().to_string(),
         |x| x.to_string_lossy().into_owned(),
     );
     let t = &s.truth;
-    let k = &s.tracker;
-    let _ = writeln!(out, "### The scenario\n");
-    let _ = writeln!(
-        out,
+    format!(
         "- **Robot:** `{robot}` (`{}`), carrying {} kg on the flange. The true robot differs from its nominal \
          model by joint-frame offsets of σ {} µm and {} µrad per axis, joint zero offsets of σ {} µrad, \
          joint compliance ({} Nm/rad, {} % scatter), gear errors of {} µrad and a repeatability of σ {} µrad per \
-         joint.",
+         joint.\n",
         s.robot.urdf.display(),
         s.robot.payload_kg,
         micro(t.frame_translation_m),
@@ -63,12 +76,17 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         rounded(t.stiffness_spread * 100.0, 2),
         micro(t.gear_amplitude_rad),
         micro(t.repeatability_rad),
-    );
+    )
+}
+
+/// The tracker's line: where it stands, its noise, and what its reflectors let it measure.
+fn tracker_in_words(study: &StudyResult) -> String {
+    let s = &study.world;
+    let k = &s.tracker;
     let reflectors = s.reflectors.nominal_m.len();
-    let _ = writeln!(
-        out,
+    format!(
         "- **Tracker:** at ({}, {}, {}) mm in the robot's base frame; noise σ {} µm + {} µm/m in range and {} µrad \
-         per angle. {}",
+         per angle. {}\n",
         rounded(k.position_m[0] * 1e3, 1),
         rounded(k.position_m[1] * 1e3, 1),
         rounded(k.position_m[2] * 1e3, 1),
@@ -82,7 +100,12 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         } else {
             format!("{reflectors} reflectors; positions only.")
         },
-    );
+    )
+}
+
+/// One line per region: its box and the tool's tilt and turn.
+fn regions_in_words(study: &StudyResult) -> String {
+    let mut out = String::new();
     for r in &study.regions {
         let _ = writeln!(
             out,
@@ -99,6 +122,13 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
             r.spin_deg,
         );
     }
+    out
+}
+
+/// What the study varies (training sets, methods) and judges them on, and how its runs went.
+fn study_in_words(study: &StudyResult, a: &Axes) -> String {
+    let c = &study.config;
+    let mut out = String::new();
     let layouts: Vec<&str> = a.distributions.iter().map(|d| d.name()).collect();
     let _ = writeln!(
         out,
@@ -139,13 +169,7 @@ fn scenario_in_words(study: &StudyResult, a: &Axes, out: &mut String) {
         failed
     );
     let _ = writeln!(out, "- **Worse than nominal:** {}\n", worse_in_words(study));
-    let _ = writeln!(
-        out,
-        "*Ground-truth mean*: the mean distance (mm) between where a method predicts the reflector and where it \
-         truly is, over the noise-free grid — what a user of the calibrated robot gets. *Test*: the same against \
-         tracker measurements of the test points (noise included). Medians over the successful seeds; \
-         [q1–q3] is the interquartile range.\n"
-    );
+    out
 }
 
 /// The runs whose calibration leaves the arm worse than the nominal model on the same campaign (ground-truth
@@ -230,13 +254,24 @@ fn verdict(
             fmt_mm(t)
         );
     }
+    let curve = curve_in_words(c, last, t);
+    let target = smallest_target_in_words(answers, region, method);
+    format!(
+        "**{method}**: {curve}{target}.{}{failures}",
+        layout_sentence(method, curves)
+    )
+}
+
+/// Where the best layout's curve `c` ends (`t` mm at `last`) and whether it still falls there: more points would
+/// help, or the model is the limit.
+fn curve_in_words(c: &Curve, last: &CurvePoint, t: f64) -> String {
     let previous = c
         .points
         .iter()
         .rev()
         .filter(|p| p.n_train < last.n_train)
         .find_map(|p| p.truth.map(|s| (p.n_train, s.median)));
-    let curve = match previous {
+    match previous {
         Some((n0, t0)) if t0 > (1.0 + PLATEAU_TOLERANCE) * t => format!(
             "still improving at {} points with {} — {} mm, down from {} mm at {n0}; more points would help",
             last.n_train,
@@ -252,13 +287,18 @@ fn verdict(
             PLATEAU_TOLERANCE * 100.0,
             plateau_from(&c.points).map_or("—".to_string(), |n| n.to_string()),
         ),
-    };
+    }
+}
+
+/// The smallest target on the ground-truth mean that `method` reaches in `region`, from how many points with
+/// which layout; or that it reaches none.
+fn smallest_target_in_words(answers: &[Answer], region: &str, method: MethodKind) -> String {
     let reached = answers
         .iter()
         .filter(|x| x.region == region && x.statistic == STATISTICS[0].0)
         .filter_map(|x| Some((x.target_mm, x.best_of(method)?)))
         .min_by(|a, b| a.0.total_cmp(&b.0));
-    let target = match reached {
+    match reached {
         Some((target, cell)) => format!(
             "; its smallest target reached is {} mm (mean), from {} points with {}",
             fmt_target(target),
@@ -266,11 +306,7 @@ fn verdict(
             cell.distribution.name()
         ),
         None => "; it reaches none of the targets".to_string(),
-    };
-    format!(
-        "**{method}**: {curve}{target}.{}{failures}",
-        layout_sentence(method, curves)
-    )
+    }
 }
 
 /// Why the model-based layout helps or hurts `method`: its error against the best geometric layout's at the
@@ -413,6 +449,28 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
             }
             out.push('\n');
         }
+    }
+}
+
+/// A study's `summary.md`, rendered. The recording shows it as a document, so [`super::recording::record`] takes
+/// a `Summary` rather than any text: only [`Summary::of`] makes one, and a recording cannot be made before its
+/// study's summary exists.
+pub struct Summary(String);
+
+impl Summary {
+    /// Renders the study's `summary.md` ([`summary_md`]).
+    pub fn of(study: &StudyResult) -> Result<Summary> {
+        summary_md(study).map(Summary)
+    }
+
+    /// The markdown text.
+    pub fn markdown(&self) -> &str {
+        &self.0
+    }
+
+    /// The bytes of `summary.md`.
+    pub fn into_bytes(self) -> Vec<u8> {
+        self.0.into_bytes()
     }
 }
 

@@ -171,30 +171,7 @@ pub(super) fn compact_curves_md(a: &Axes, curves: &[Curve], out: &mut String) {
 /// Runs whose ground-truth mean is above `nominal`'s on the same campaign (region, layout, size, seed): the
 /// calibration made the arm worse. Counted per method and listed.
 pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
-    let column = "truth_mean_mm";
-    let mut worse: Vec<(&RunMetrics, f64, f64)> = Vec::new();
-    for r in study
-        .runs
-        .iter()
-        .filter(|r| r.failure.is_none() && r.key.method != REFERENCE)
-    {
-        let nominal = study.runs.iter().find(|n| {
-            n.key.method == REFERENCE
-                && n.failure.is_none()
-                && n.key.region == r.key.region
-                && n.key.distribution == r.key.distribution
-                && n.key.n_train == r.key.n_train
-                && n.key.seed == r.key.seed
-        });
-        let (Some(n), Some(v)) = (nominal, cell(r, study.orientation, column)) else {
-            continue;
-        };
-        if let Some(before) = cell(n, study.orientation, column)
-            && v > before
-        {
-            worse.push((r, v, before));
-        }
-    }
+    let worse = worse_runs(study);
     let _ = writeln!(out, "### Runs where calibration made the arm worse\n");
     if !study.runs.iter().any(|r| r.key.method == REFERENCE) {
         let _ = writeln!(
@@ -251,6 +228,36 @@ pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
         );
     }
     out.push('\n');
+}
+
+/// The successful runs whose ground-truth mean is above `nominal`'s on the same campaign, with both values (mm),
+/// in the study's order.
+fn worse_runs(study: &StudyResult) -> Vec<(&RunMetrics, f64, f64)> {
+    let column = "truth_mean_mm";
+    let mut worse: Vec<(&RunMetrics, f64, f64)> = Vec::new();
+    for r in study
+        .runs
+        .iter()
+        .filter(|r| r.failure.is_none() && r.key.method != REFERENCE)
+    {
+        let nominal = study.runs.iter().find(|n| {
+            n.key.method == REFERENCE
+                && n.failure.is_none()
+                && n.key.region == r.key.region
+                && n.key.distribution == r.key.distribution
+                && n.key.n_train == r.key.n_train
+                && n.key.seed == r.key.seed
+        });
+        let (Some(n), Some(v)) = (nominal, cell(r, study.orientation, column)) else {
+            continue;
+        };
+        if let Some(before) = cell(n, study.orientation, column)
+            && v > before
+        {
+            worse.push((r, v, before));
+        }
+    }
+    worse
 }
 
 /// At most this many runs made worse are listed in the summary.

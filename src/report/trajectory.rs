@@ -240,57 +240,69 @@ pub fn trajectory_md(study: &StudyResult, out: &mut String) {
         if study.regions.len() > 1 {
             let _ = writeln!(out, "Region `{region}`:\n");
         }
-        let mut head = String::from("| method | targets | stop and go: min / mm |");
-        let mut rule = String::from("|---|---:|---:|");
-        for s in &cfg.speeds {
-            let _ = write!(head, " speed {s}: min / mm |");
-            rule += "---:|";
-        }
-        let _ = writeln!(out, "{head}\n{rule}");
-        for row in rows.iter().filter(|r| r.region == region) {
+        out.push_str(&comparison_table(&rows, region, &cfg.speeds));
+        out.push('\n');
+        out.push_str(&runs_in_words(t, region));
+    }
+}
+
+/// The table of one region: a row per method and targets, stop and go then each speed (tracker minutes / mm).
+fn comparison_table(rows: &[Comparison], region: &str, speeds: &[f64]) -> String {
+    let mut out = String::new();
+    let mut head = String::from("| method | targets | stop and go: min / mm |");
+    let mut rule = String::from("|---|---:|---:|");
+    for s in speeds {
+        let _ = write!(head, " speed {s}: min / mm |");
+        rule += "---:|";
+    }
+    let _ = writeln!(out, "{head}\n{rule}");
+    for row in rows.iter().filter(|r| r.region == region) {
+        let _ = write!(
+            out,
+            "| `{}` | {} | {:.1} / {} |",
+            row.label(),
+            row.n_targets,
+            row.stop.tracker_s.unwrap_or(f64::NAN) / 60.0,
+            cell(row.stop.mean_mm)
+        );
+        for (_, p) in &row.speeds {
             let _ = write!(
                 out,
-                "| `{}` | {} | {:.1} / {} |",
-                row.label(),
-                row.n_targets,
-                row.stop.tracker_s.unwrap_or(f64::NAN) / 60.0,
-                cell(row.stop.mean_mm)
+                " {} / {} |",
+                p.tracker_s
+                    .map_or("—".into(), |x| format!("{:.1}", x / 60.0)),
+                cell(p.mean_mm)
             );
-            for (_, p) in &row.speeds {
-                let _ = write!(
-                    out,
-                    " {} / {} |",
-                    p.tracker_s
-                        .map_or("—".into(), |x| format!("{:.1}", x / 60.0)),
-                    cell(p.mean_mm)
-                );
-            }
-            out.push('\n');
         }
         out.push('\n');
-        let clock: Vec<f64> = t
-            .iter()
-            .filter(|r| r.region == region && r.clock_error_s.is_finite())
-            .map(|r| r.clock_error_s.abs() * 1e6)
-            .collect();
-        let dynamic = t
-            .iter()
-            .filter(|r| r.region == region)
-            .map(|r| r.dynamic_max_m * 1e3)
-            .fold(0.0f64, f64::max);
-        let failed = t
-            .iter()
-            .filter(|r| r.region == region && r.failure.is_some())
-            .count();
-        let _ = writeln!(
-            out,
-            "Clock offset recovered to {} µs (largest error over the runs); the motion displaced the flange by up \
-             to {dynamic:.3} mm from where it would stand still; {failed} trajectory runs failed.\n",
-            clock
-                .iter()
-                .copied()
-                .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b))))
-                .map_or("—".into(), |x| format!("{x:.1}"))
-        );
     }
+    out
+}
+
+/// How a region's trajectory runs went: the largest clock error left, the largest motion displacement, the
+/// failures.
+fn runs_in_words(t: &[TrajectoryRun], region: &str) -> String {
+    let clock: Vec<f64> = t
+        .iter()
+        .filter(|r| r.region == region && r.clock_error_s.is_finite())
+        .map(|r| r.clock_error_s.abs() * 1e6)
+        .collect();
+    let dynamic = t
+        .iter()
+        .filter(|r| r.region == region)
+        .map(|r| r.dynamic_max_m * 1e3)
+        .fold(0.0f64, f64::max);
+    let failed = t
+        .iter()
+        .filter(|r| r.region == region && r.failure.is_some())
+        .count();
+    format!(
+        "Clock offset recovered to {} µs (largest error over the runs); the motion displaced the flange by up \
+         to {dynamic:.3} mm from where it would stand still; {failed} trajectory runs failed.\n\n",
+        clock
+            .iter()
+            .copied()
+            .fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b))))
+            .map_or("—".into(), |x| format!("{x:.1}"))
+    )
 }

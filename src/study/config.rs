@@ -88,8 +88,26 @@ pub struct StudyConfig {
 }
 
 impl StudyConfig {
-    /// Checks that need no robot; `regions` are the scenario's. Messages name the field (`sizes: …`).
+    /// Checks that need no robot; `regions` are the scenario's. Messages name the field (`sizes: …`); the first
+    /// failing check, in this order, is the one reported.
     pub fn validate(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
+        self.check_sizes()?;
+        self.check_distributions()?;
+        self.check_methods()?;
+        if self.seeds == 0 {
+            return Err("seeds = 0: at least one repetition is needed".into());
+        }
+        if let Some(t) = &self.trajectory {
+            t.validate(self)?;
+        }
+        self.check_campaign_count(regions)?;
+        self.check_judging()?;
+        self.check_answer()?;
+        self.check_campaigns_fit(regions)
+    }
+
+    /// The training-set sizes: at least one, each in 1..=[`MAX_POINTS`], none twice.
+    fn check_sizes(&self) -> std::result::Result<(), String> {
         if self.sizes.is_empty() {
             return Err("sizes is empty: list at least one training-set size".into());
         }
@@ -104,6 +122,11 @@ impl StudyConfig {
                 return Err(format!("sizes: {n} is listed twice"));
             }
         }
+        Ok(())
+    }
+
+    /// The layouts: at least one, none twice.
+    fn check_distributions(&self) -> std::result::Result<(), String> {
         if self.distributions.is_empty() {
             return Err("distributions is empty: list at least one layout".into());
         }
@@ -112,6 +135,11 @@ impl StudyConfig {
                 return Err(format!("distributions: '{}' is listed twice", d.name()));
             }
         }
+        Ok(())
+    }
+
+    /// The methods: at least one, none twice, and the detail method among them.
+    fn check_methods(&self) -> std::result::Result<(), String> {
         if self.methods.is_empty() {
             return Err("methods is empty: list at least one method".into());
         }
@@ -129,22 +157,23 @@ impl StudyConfig {
                 names.join(", ")
             ));
         }
-        if self.seeds == 0 {
-            return Err("seeds = 0: at least one repetition is needed".into());
-        }
-        if let Some(t) = &self.trajectory {
-            t.validate(self)?;
-        }
-        let campaigns = (regions.len() as u128)
-            * (self.distributions.len() as u128)
-            * (self.sizes.len() as u128)
-            * (self.seeds as u128);
+        Ok(())
+    }
+
+    /// At most [`MAX_CAMPAIGNS`] campaigns (regions × layouts × sizes × seeds).
+    fn check_campaign_count(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
+        let campaigns = self.campaigns(regions.len());
         if campaigns > MAX_CAMPAIGNS {
             return Err(format!(
                 "seeds = {}: {campaigns} campaigns exceed {MAX_CAMPAIGNS}",
                 self.seeds
             ));
         }
+        Ok(())
+    }
+
+    /// How the runs are judged: the validation share, the test set, the ground-truth sets and the distance bands.
+    fn check_judging(&self) -> std::result::Result<(), String> {
         if !(self.validation_ratio.is_finite() && self.validation_ratio > 0.0) {
             return Err(format!(
                 "validation_ratio = {} must be finite and positive",
@@ -172,6 +201,11 @@ impl StudyConfig {
                 self.distance_bands_m
             ));
         }
+        Ok(())
+    }
+
+    /// What the answer needs: the targets (positive, none twice) and the tracker time per point.
+    fn check_answer(&self) -> std::result::Result<(), String> {
         if self.targets_mm.is_empty() {
             return Err("targets_mm is empty: list at least one accuracy (mm)".into());
         }
@@ -196,6 +230,11 @@ impl StudyConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Every campaign (a training set and its validation points) fits in every region's `points`.
+    fn check_campaigns_fit(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
         for &n in &self.sizes {
             let total = self.campaign_points(n);
             if let Some(r) = regions.iter().find(|r| total > r.points) {
