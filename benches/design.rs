@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use calibench::app::simulate;
 use calibench::calib::method::FitContext;
 use calibench::calib::registry::MethodKind;
-use calibench::campaign::{DistributionKind, Generator, RegionConfig};
+use calibench::campaign::{Generator, LayoutKind, RegionConfig};
 use calibench::design::DOptimal;
 use calibench::design::{DesignModel, SelectOptions, d_optimal};
 use calibench::robot::dh::DhChain;
@@ -84,7 +84,7 @@ fn main() {
     // measured, then chosen from.
     let region = RegionConfig {
         points: 150,
-        distribution: DistributionKind::DOptimal,
+        layout: LayoutKind::DOptimal,
         ..scenario.regions[0].clone()
     };
     let runs: Vec<Duration> = (0..5)

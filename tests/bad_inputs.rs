@@ -231,7 +231,7 @@ fn cases(f: &Fixture) -> Vec<Case> {
 
     // Scenarios: through `campaign`.
     let small = small_scenario(40);
-    let study = "\n[study]\nsizes = [10]\ndistributions = [\"uniform\"]\nmethods = [\"nominal\", \"kinematic\"]\n\
+    let study = "\n[study]\nsizes = [10]\nlayouts = [\"uniform\"]\nmethods = [\"nominal\", \"kinematic\"]\n\
                  seeds = 20000\ntest_points = 1000\ngrid_points = 100000\nshell_width_m = 0.05\n\
                  shell_points = 100\nclosed_loop_points = 100\n";
     let scenarios = [

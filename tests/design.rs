@@ -124,8 +124,8 @@ fn geometric(layout: &str, points: usize, seed: u64) -> Scenario {
     let text = edit(GEOMETRIC, "points = 2335", &format!("points = {points}"));
     let text = edit(
         &text,
-        "distribution = \"uniform\"",
-        &format!("distribution = \"{layout}\""),
+        "layout = \"uniform\"",
+        &format!("layout = \"{layout}\""),
     );
     let text = edit(&text, "seed = 2019", &format!("seed = {seed}"));
     Scenario::parse(&text, "geometric_only").unwrap()
@@ -173,7 +173,7 @@ fn d_optimal_beats_uniform_at_small_n_for_kinematic_on_geometric_only() {
     let study = r#"
 [study]
 sizes = [15]
-distributions = ["uniform", "d-optimal"]
+layouts = ["uniform", "d-optimal"]
 methods = ["kinematic"]
 seeds = 10
 test_points = 60
@@ -189,7 +189,7 @@ closed_loop_points = 5
         let mut v: Vec<f64> = result
             .runs
             .iter()
-            .filter(|r| r.key.distribution.name() == layout)
+            .filter(|r| r.key.layout.name() == layout)
             .map(|r| r.truth.as_ref().map_or(f64::INFINITY, |s| s.mean))
             .collect();
         assert_eq!(v.len(), 10);
@@ -245,7 +245,7 @@ fn in_a_study_d_optimal_points_are_chosen_for_the_method_that_uses_them() {
     let study = r#"
 [study]
 sizes = [40]
-distributions = ["uniform", "d-optimal"]
+layouts = ["uniform", "d-optimal"]
 methods = ["kinematic", "hybrid-kinematic", "elastic", "residual-ridge"]
 seeds = 1
 test_points = 40
@@ -261,7 +261,7 @@ closed_loop_points = 0
         result
             .runs
             .iter()
-            .find(|r| r.key.distribution.name() == layout && r.key.method.name() == method)
+            .find(|r| r.key.layout.name() == layout && r.key.method.name() == method)
             .unwrap_or_else(|| panic!("{layout} {method}"))
     };
     let floor = |layout: &str, method: &str| run(layout, method).floor_mean.unwrap();

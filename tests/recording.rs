@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use calibench::calib::registry::MethodKind;
-use calibench::campaign::DistributionKind;
+use calibench::campaign::LayoutKind;
 use calibench::eval::Stats;
 use calibench::report::recording::{self, arrow_factor};
 use calibench::report::summary::Summary;
@@ -34,7 +34,7 @@ const METHODS: [&str; 2] = ["kinematic", "residual-ridge"];
 fn kind(name: &str) -> MethodKind {
     MethodKind::parse(name).unwrap()
 }
-const DISTRIBUTIONS: [DistributionKind; 2] = [DistributionKind::Uniform, DistributionKind::Sobol];
+const LAYOUTS: [LayoutKind; 2] = [LayoutKind::Uniform, LayoutKind::Sobol];
 const N_POINTS: usize = 7;
 const N_GRID: usize = 12;
 
@@ -54,7 +54,7 @@ fn study(chain: &Chain) -> StudyResult {
     let region = regions[0].name.clone();
 
     let mut runs = Vec::new();
-    for distribution in DISTRIBUTIONS {
+    for layout in LAYOUTS {
         for (m, method) in METHODS.iter().enumerate() {
             for &n_train in &SIZES {
                 for seed in 0..SEEDS {
@@ -66,7 +66,7 @@ fn study(chain: &Chain) -> StudyResult {
                     runs.push(RunMetrics {
                         key: RunKey {
                             region: region.clone(),
-                            distribution,
+                            layout,
                             method: kind(method),
                             n_train,
                             seed,
@@ -133,7 +133,7 @@ fn study(chain: &Chain) -> StudyResult {
     );
     let detail = Detail {
         region: region.clone(),
-        distribution: DistributionKind::Uniform,
+        layout: LayoutKind::Uniform,
         method: kind(METHODS[0]),
         n_train: SIZES[2],
         points,
@@ -144,7 +144,7 @@ fn study(chain: &Chain) -> StudyResult {
 
     let config = StudyConfig {
         sizes: SIZES.to_vec(),
-        distributions: DISTRIBUTIONS.to_vec(),
+        layouts: LAYOUTS.to_vec(),
         methods: METHODS.iter().map(|m| kind(m)).collect(),
         seeds: SEEDS,
         validation_ratio: 0.5,
@@ -387,10 +387,10 @@ fn recording_holds_the_documented_entities() {
         .keys()
         .filter(|k| k.starts_with("curves/"))
         .collect();
-    assert_eq!(curve_paths.len(), DISTRIBUTIONS.len() * METHODS.len());
-    for distribution in DISTRIBUTIONS {
+    assert_eq!(curve_paths.len(), LAYOUTS.len() * METHODS.len());
+    for layout in LAYOUTS {
         for m in METHODS {
-            let path = format!("curves/{region}/{}/{m}", distribution.name());
+            let path = format!("curves/{region}/{}/{m}", layout.name());
             let e = entity(&entities, &path);
             assert_has(e, &path, &["Scalars:scalars", "SeriesLines:names"]);
             assert_eq!(e.timeline_rows.get("n_train"), Some(&SIZES.len()), "{path}");
@@ -407,10 +407,10 @@ fn recording_holds_the_documented_entities() {
     }
     let curves = recording::learning_curves(&study);
     // The log timeline of the curves, where the viewer opens: 1000 · log10(n).
-    for distribution in DISTRIBUTIONS {
+    for layout in LAYOUTS {
         let e = entity(
             &entities,
-            &format!("curves/{region}/{}/{}", distribution.name(), METHODS[0]),
+            &format!("curves/{region}/{}/{}", layout.name(), METHODS[0]),
         );
         assert_eq!(
             e.times["n_train_log"],
@@ -600,8 +600,8 @@ fn recording_opens_on_a_designed_blueprint_and_is_named_after_the_scenario() {
 
     // One learning-curve plot per layout, each showing every method of that layout.
     let series = of_class("TimeSeries");
-    assert_eq!(series.len(), DISTRIBUTIONS.len());
-    for d in DISTRIBUTIONS {
+    assert_eq!(series.len(), LAYOUTS.len());
+    for d in LAYOUTS {
         let v = series
             .iter()
             .find(|v| v.3 == format!("/curves/paper/{}", d.name()))
@@ -626,7 +626,7 @@ fn recording_opens_on_a_designed_blueprint_and_is_named_after_the_scenario() {
         .map(|v| v.3.as_str())
         .collect();
     assert_eq!(documents, ["/legend", "/summary"].into_iter().collect());
-    assert_eq!(views.len(), 1 + DISTRIBUTIONS.len() + METHODS.len() + 2);
+    assert_eq!(views.len(), 1 + LAYOUTS.len() + METHODS.len() + 2);
 
     // Every view sits in a container under the viewport's root, and the time panel opens on the log timeline.
     let contained: BTreeSet<String> = blueprint

@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use calibench::calib::registry::MethodKind;
-use calibench::campaign::DistributionKind;
+use calibench::campaign::LayoutKind;
 use calibench::design::Indices;
 use calibench::eval::Stats;
 use calibench::report::aggregate::{CurvePoint, Spread, learning_curves, points_needed};
@@ -36,12 +36,12 @@ fn stats(mean_m: f64) -> Stats {
 /// Median ground-truth mean (mm) of each method's learning curve, by size: `nominal` flat, `paper-rotxyz`
 /// plateaus far above the floor, `elastic` comes within 1.5 × the floor (0.025 mm) and 10 % of its plateau
 /// at 120 points (with uniform) or 60 (with sobol).
-fn truth_mm(method: &str, d: DistributionKind, n: usize) -> f64 {
+fn truth_mm(method: &str, d: LayoutKind, n: usize) -> f64 {
     let i = SIZES.iter().position(|&s| s == n).unwrap();
     match (method, d) {
         ("nominal", _) => 0.40,
         ("paper-rotxyz", _) => [0.50, 0.25, 0.17, 0.16][i],
-        ("elastic", DistributionKind::Sobol) => [0.20, 0.032, 0.031, 0.030][i],
+        ("elastic", LayoutKind::Sobol) => [0.20, 0.032, 0.031, 0.030][i],
         ("elastic", _) => [0.20, 0.035, 0.031, 0.030][i],
         _ => unreachable!(),
     }
@@ -52,10 +52,10 @@ pub fn study(orientation: bool) -> StudyResult {
     let scenario = Scenario::load(&path).expect("the shipped scenario loads");
     let regions = scenario.regions.clone();
     let methods = ["nominal", "paper-rotxyz", "elastic"];
-    let distributions = [DistributionKind::Uniform, DistributionKind::Sobol];
+    let layouts = [LayoutKind::Uniform, LayoutKind::Sobol];
     let config = StudyConfig {
         sizes: SIZES.to_vec(),
-        distributions: distributions.to_vec(),
+        layouts: layouts.to_vec(),
         methods: methods
             .iter()
             .map(|m| MethodKind::parse(m).unwrap())
@@ -77,7 +77,7 @@ pub fn study(orientation: bool) -> StudyResult {
     };
     let mut runs = Vec::new();
     for region in &regions {
-        for &d in &distributions {
+        for &d in &layouts {
             for m in methods {
                 for n in SIZES {
                     for seed in 0..SEEDS {
@@ -86,12 +86,12 @@ pub fn study(orientation: bool) -> StudyResult {
                             1.0 + 0.03 * (seed as f64 - 1.0) * if seed == 2 { 1.7 } else { 1.0 };
                         let t = truth_mm(m, d, n) * f * 1e-3;
                         let failed =
-                            m == "elastic" && d == DistributionKind::Sobol && n == 60 && seed == 2;
+                            m == "elastic" && d == LayoutKind::Sobol && n == 60 && seed == 2;
                         let ori = |x: f64| orientation.then(|| stats(x));
                         runs.push(RunMetrics {
                             key: RunKey {
                                 region: region.name.clone(),
-                                distribution: d,
+                                layout: d,
                                 method: MethodKind::parse(m).unwrap(),
                                 n_train: n,
                                 seed,
@@ -144,7 +144,7 @@ pub fn study(orientation: bool) -> StudyResult {
     StudyResult {
         detail: Detail {
             region: regions[0].name.clone(),
-            distribution: DistributionKind::Uniform,
+            layout: LayoutKind::Uniform,
             method: MethodKind::Elastic,
             n_train: 240,
             points: Vec::new(),
@@ -291,7 +291,7 @@ fn metrics_rows_hold_millimetres_and_failures_leave_empty_cells() {
         assert_eq!(row["scenario"], "paper_iiwa");
         assert_eq!(row["method"], run.key.method.name());
         assert_eq!(row["seed"], run.key.seed.to_string());
-        assert_eq!(row["distribution"], run.key.distribution.name());
+        assert_eq!(row["distribution"], run.key.layout.name());
         assert_eq!(row["fit_ms"], format!("{:.1}", run.fit_ms));
         if let Some(t) = &run.truth
             && run.failure.is_none()
@@ -470,16 +470,16 @@ fn points_needed_is_the_first_size_near_both_plateau_and_floor() {
     // The same rule on the hand-made study, and as summary.md shows it.
     let s = study(false);
     let curves = learning_curves(&s);
-    let find = |m: &str, d: DistributionKind| {
+    let find = |m: &str, d: LayoutKind| {
         let c = curves
             .iter()
-            .find(|c| c.method.name() == m && c.distribution == d)
+            .find(|c| c.method.name() == m && c.layout == d)
             .unwrap();
         points_needed(&c.points)
     };
-    assert_eq!(find("elastic", DistributionKind::Uniform), Some(120));
-    assert_eq!(find("elastic", DistributionKind::Sobol), Some(60));
-    assert_eq!(find("paper-rotxyz", DistributionKind::Uniform), None);
+    assert_eq!(find("elastic", LayoutKind::Uniform), Some(120));
+    assert_eq!(find("elastic", LayoutKind::Sobol), Some(60));
+    assert_eq!(find("paper-rotxyz", LayoutKind::Uniform), None);
     // The verdicts compare with the targets, not with the floor.
     let md = summary_md(&s).unwrap();
     let verdict = &md[md.find("## Verdict").unwrap()..md.find("## Details").unwrap()];

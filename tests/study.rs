@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 
 use calibench::app::run_study;
 use calibench::calib::registry::MethodKind;
-use calibench::campaign::DistributionKind;
+use calibench::campaign::LayoutKind;
 use calibench::scenario::Scenario;
 use calibench::study::sweep::RunOptions;
 use calibench::study::{RunMetrics, StudyResult};
@@ -30,7 +30,7 @@ fn study_text(study: &str) -> String {
 fn tiny() -> String {
     study_text(&format!(
         r#"sizes = [10, 40]
-distributions = ["uniform", "sobol"]
+layouts = ["uniform", "sobol"]
 methods = ["nominal", "{}", "{}"]
 seeds = 2
 test_points = 80
@@ -83,15 +83,11 @@ fn every_run_is_there_in_config_order_and_failures_carry_their_reason() {
     let c = &result.config;
     assert_eq!(
         result.runs.len(),
-        result.regions.len()
-            * c.distributions.len()
-            * c.methods.len()
-            * c.sizes.len()
-            * c.seeds as usize
+        result.regions.len() * c.layouts.len() * c.methods.len() * c.sizes.len() * c.seeds as usize
     );
     let mut expected = Vec::new();
     for region in &result.regions {
-        for &d in &c.distributions {
+        for &d in &c.layouts {
             for m in &c.methods {
                 for &n in &c.sizes {
                     for s in 0..c.seeds {
@@ -106,13 +102,7 @@ fn every_run_is_there_in_config_order_and_failures_carry_their_reason() {
         .iter()
         .map(|r| {
             let k = &r.key;
-            (
-                k.region.clone(),
-                k.distribution,
-                k.method,
-                k.n_train,
-                k.seed,
-            )
+            (k.region.clone(), k.layout, k.method, k.n_train, k.seed)
         })
         .collect();
     assert_eq!(keys, expected);
@@ -149,7 +139,7 @@ fn the_detail_is_the_largest_size_of_the_first_layout_and_seed() {
     let result = two_threads();
     let d = &result.detail;
     assert_eq!(d.region, "paper");
-    assert_eq!(d.distribution, DistributionKind::Uniform);
+    assert_eq!(d.layout, LayoutKind::Uniform);
     assert_eq!(d.method, MethodKind::Elastic);
     assert_eq!(d.n_train, 40);
     assert_eq!(d.points.len(), 40 + 20, "training and validation points");
@@ -175,7 +165,7 @@ fn the_detail_is_the_largest_size_of_the_first_layout_and_seed() {
             r.key.method == MethodKind::Elastic
                 && r.key.n_train == 40
                 && r.key.seed == 0
-                && r.key.distribution == DistributionKind::Uniform
+                && r.key.layout == LayoutKind::Uniform
         })
         .unwrap();
     let grid_mean = d.grid.iter().map(|g| g.residual).sum::<f64>() / d.grid.len() as f64;
@@ -188,7 +178,7 @@ fn a_run_does_not_depend_on_what_else_the_study_lists() {
         2,
         &study_text(
             r#"sizes = [40]
-distributions = ["sobol"]
+layouts = ["sobol"]
 methods = ["elastic"]
 seeds = 2
 test_points = 80
@@ -213,8 +203,16 @@ closed_loop_points = 20
 fn the_default_study_parses_and_covers_every_method_and_layout() {
     let scenario = Scenario::parse(DEFAULT, "scenarios/default.toml").unwrap();
     let study = scenario.study.expect("default.toml has a [study]");
-    assert_eq!(study.distributions, DistributionKind::ALL.to_vec());
+    assert_eq!(study.layouts, LayoutKind::ALL.to_vec());
     assert_eq!(study.methods, MethodKind::ALL.to_vec());
+    // Scenarios written before the keys were named for layouts still read, to the same scenario.
+    let older = DEFAULT
+        .replace("\nlayouts = ", "\ndistributions = ")
+        .replace("\nlayout = ", "\ndistribution = ");
+    assert_ne!(older, DEFAULT);
+    let read = Scenario::parse(&older, "older keys").unwrap();
+    assert_eq!(read.study.as_ref().unwrap().layouts, study.layouts);
+    assert_eq!(read.regions, Scenario::parse(DEFAULT, "d").unwrap().regions);
     assert!(study.seeds >= 5);
     assert!(study.sizes.first().is_some_and(|&n| n <= 20));
     assert!(study.sizes.last().is_some_and(|&n| n >= 1000));
@@ -265,7 +263,7 @@ fn bad_study_sections_are_refused_naming_the_field() {
     refused(
         "\"uniform\", \"sobol\"",
         "\"uniform\", \"hexagonal\"",
-        &["distributions", "hexagonal"],
+        &["study.layouts", "hexagonal"],
     );
     refused(
         "seeds = 2",
@@ -331,8 +329,8 @@ fn regions_study() -> &'static StudyResult {
         let mut text = edit(&ideal, "sizes = [30, 125, 500]", "sizes = [60]");
         text = edit(
             &text,
-            r#"distributions = ["uniform", "d-optimal"]"#,
-            r#"distributions = ["uniform"]"#,
+            r#"layouts = ["uniform", "d-optimal"]"#,
+            r#"layouts = ["uniform"]"#,
         );
         text = edit(
             &text,

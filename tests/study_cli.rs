@@ -18,8 +18,8 @@ pub fn small_study() -> String {
     );
     text = edit(
         &text,
-        r#"distributions = ["uniform", "grid", "sobol", "latin-hypercube", "d-optimal"]"#,
-        r#"distributions = ["uniform", "d-optimal"]"#,
+        r#"layouts = ["uniform", "grid", "sobol", "latin-hypercube", "d-optimal"]"#,
+        r#"layouts = ["uniform", "d-optimal"]"#,
     );
     text = edit(
         &text,
@@ -133,8 +133,8 @@ fn bad_study_inputs_are_one_line_and_write_nothing() {
             "magic",
         ),
         (
-            r#"distributions = ["uniform", "d-optimal"]"#,
-            r#"distributions = ["uniform", "spiral"]"#,
+            r#"layouts = ["uniform", "d-optimal"]"#,
+            r#"layouts = ["uniform", "spiral"]"#,
             "spiral",
         ),
         (

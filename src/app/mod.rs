@@ -126,7 +126,7 @@ pub fn simulate(scenario: &Scenario) -> Result<Simulation> {
     let campaign = {
         let ctx = FitContext::of(&world);
         let selector = DOptimal::when_needed(
-            scenario.regions.iter().map(|r| r.distribution),
+            scenario.regions.iter().map(|r| r.layout),
             &scenario.campaign.selection,
             &ctx,
             &world.mounting.nominal,

@@ -76,7 +76,7 @@ impl Generator<'_> {
     ) -> Result<Vec<Result<RegionPoints>>> {
         let anchor = self.anchor(region)?;
         let want = region.points;
-        let selects = region.distribution.selects();
+        let selects = region.layout.selects();
         let mut candidates = if selects {
             self.config.selection.pool(want)
         } else {
@@ -84,7 +84,7 @@ impl Generator<'_> {
         };
         let mut last = Rejections::default();
         for attempt in 0..MAX_ATTEMPTS {
-            let layout = region.distribution.build();
+            let layout = region.layout.build();
             let unit = layout.sample(
                 candidates,
                 region.size_m,
@@ -98,7 +98,7 @@ impl Generator<'_> {
                     return Err(Error::Invalid(format!(
                         "region '{}': layout '{}' chooses its points for a model, and no model was given",
                         region.name,
-                        region.distribution.name()
+                        region.layout.name()
                     )));
                 }
                 return Ok(selectors
@@ -275,7 +275,7 @@ impl Generator<'_> {
         use rand::Rng;
         let mut rng = derive(self.seed, Stream::Target, &[r, attempt, i]);
         let target = region.target(unit, &mut rng);
-        let spread = if region.distribution.selects() {
+        let spread = if region.layout.selects() {
             self.config
                 .posture_spread_deg
                 .max(self.config.selection.posture_spread_deg)

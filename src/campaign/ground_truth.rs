@@ -3,8 +3,8 @@
 
 use nalgebra::{Isometry3, Point3};
 
-use super::distribution::DistributionKind;
 use super::generator::Generator;
+use super::layout::LayoutKind;
 use super::points::Rejections;
 use super::region::RegionConfig;
 use crate::error::{Error, Result};
@@ -50,7 +50,7 @@ impl Generator<'_> {
         // Ground truth is where the arm is used, with the campaign's own redundancy resolution, not a
         // model-based pool's.
         let region = &RegionConfig {
-            distribution: DistributionKind::Uniform,
+            layout: LayoutKind::Uniform,
             ..region.clone()
         };
         let planned = self.plan_all(r, attempt, region, &anchor, unit, &collision);

@@ -3,13 +3,13 @@
 //! A campaign takes the [`World`] it is measured in and its own configuration ([`CampaignConfig`], regions).
 //!
 //! The files import one way, from the bottom up: `points` (what a campaign is made of), `config`, `region` and
-//! `distribution` (what a campaign is asked for), `generator` (the generator and the true arm's settling),
+//! `layout` (how a region's points are placed), `generator` (the generator and the true arm's settling),
 //! `sequence` (measuring commands in their order, a replayed campaign), `generate` (planning a campaign:
 //! targets, inverse kinematics, feasibility), and on it `ground_truth` and `selected`. `trajectory` (measuring
 //! on the fly) needs only `points` and `config`.
 
 pub mod config;
-pub mod distribution;
+pub mod layout;
 pub mod generate;
 pub mod generator;
 pub mod ground_truth;
@@ -20,8 +20,8 @@ pub mod sequence;
 pub mod trajectory;
 
 pub use config::{CampaignConfig, SelectionConfig, TrajectoryConfig};
-pub use distribution::{DistributionKind, PointDistribution};
 pub use generator::{Generator, Selector};
+pub use layout::{LayoutKind, PointLayout};
 pub use points::{Campaign, CampaignPoint, Rejections};
 pub use region::RegionConfig;
 pub use sequence::Stop;

@@ -5,7 +5,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::distribution::DistributionKind;
+use super::layout::LayoutKind;
 
 /// The most points a region may ask for. The paper measured 2 335 and the real UR10 series a few thousand;
 /// a hundred thousand is forty times that, and with up to 50 candidate targets planned per point it is
@@ -13,8 +13,8 @@ use super::distribution::DistributionKind;
 /// without end.
 pub const MAX_REGION_POINTS: usize = 100_000;
 
-fn default_distribution() -> DistributionKind {
-    DistributionKind::Uniform
+fn default_layout() -> LayoutKind {
+    LayoutKind::Uniform
 }
 
 /// A box in the robot's base frame where the tool works, with the tool orientations allowed there.
@@ -28,8 +28,9 @@ pub struct RegionConfig {
     pub size_m: [f64; 3],
     /// Measured points wanted in this region.
     pub points: usize,
-    #[serde(default = "default_distribution")]
-    pub distribution: DistributionKind,
+    /// How the region's points are placed (`uniform`, `grid`, `sobol`, …); `distribution` is its older name.
+    #[serde(default = "default_layout", alias = "distribution")]
+    pub layout: LayoutKind,
     /// Nominal flange orientation: roll, pitch, yaw (deg, URDF fixed-axis convention, base frame).
     pub tool_rpy_deg: [f64; 3],
     /// The flange z axis may tilt up to this angle from its nominal direction (deg), uniform over the cone.
@@ -127,7 +128,7 @@ mod tests {
             center_m: [1.0, 0.0, 0.5],
             size_m: [0.2, 0.4, 0.6],
             points: 1,
-            distribution: DistributionKind::Uniform,
+            layout: LayoutKind::Uniform,
             tool_rpy_deg: [0.0; 3],
             cone_half_angle_deg: 0.0,
             spin_deg: 0.0,

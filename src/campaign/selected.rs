@@ -28,7 +28,7 @@ impl Generator<'_> {
             .map(|_| Ok(Default::default()))
             .collect();
         for (r, region) in regions.iter().enumerate() {
-            let results = if region.distribution.selects() {
+            let results = if region.layout.selects() {
                 self.region_for(r as u64, region, &collision, selectors)?
             } else {
                 let one = self

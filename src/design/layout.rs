@@ -8,7 +8,7 @@ use super::select::{SelectOptions, d_optimal};
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
 use crate::campaign::config::SelectionConfig;
-use crate::campaign::{DistributionKind, Selector};
+use crate::campaign::{LayoutKind, Selector};
 use crate::error::{Error, Result};
 
 /// D-optimal choice of a campaign's points for one design model.
@@ -20,7 +20,7 @@ pub struct DOptimal<'a> {
 impl<'a> DOptimal<'a> {
     /// The selector of `selection` when any of `layouts` chooses its points for a model, else `None`.
     pub fn when_needed(
-        layouts: impl IntoIterator<Item = DistributionKind>,
+        layouts: impl IntoIterator<Item = LayoutKind>,
         selection: &SelectionConfig,
         ctx: &FitContext<'a>,
         reflectors: &[Point3<f64>],

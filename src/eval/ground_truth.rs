@@ -15,7 +15,7 @@ use rand::Rng;
 use super::oracle::nest_rotation;
 use crate::calib::method::Fitted;
 use crate::campaign::ground_truth::{GROUND_TRUTH_ATTEMPT, TruePoint};
-use crate::campaign::{CampaignConfig, DistributionKind, Generator, RegionConfig, Rejections};
+use crate::campaign::{CampaignConfig, Generator, LayoutKind, RegionConfig, Rejections};
 use crate::error::Result;
 use crate::rng::Stream;
 use crate::world::World;
@@ -111,7 +111,7 @@ impl GroundTruth {
         let mut closed_loop = TruthSet::default();
         for (r, region) in regions.iter().enumerate() {
             let r = r as u64;
-            let unit = DistributionKind::Grid.build().sample(
+            let unit = LayoutKind::Grid.build().sample(
                 config.grid_points,
                 region.size_m,
                 &mut layout_rng(r, GRID),
@@ -129,7 +129,7 @@ impl GroundTruth {
             }
 
             if config.closed_loop_points > 0 {
-                let unit = DistributionKind::Uniform.build().sample(
+                let unit = LayoutKind::Uniform.build().sample(
                     config.closed_loop_points,
                     region.size_m,
                     &mut layout_rng(r, CLOSED_LOOP),

@@ -2,7 +2,7 @@
 //! layout, method, size), the learning curves, and the points-needed rule read off them.
 
 use crate::calib::registry::MethodKind;
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::study::{RunMetrics, StudyResult};
 
 use super::metrics::cell;
@@ -51,7 +51,7 @@ pub fn spread(values: &[f64]) -> Option<Spread> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Axes {
     pub regions: Vec<String>,
-    pub distributions: Vec<DistributionKind>,
+    pub layouts: Vec<LayoutKind>,
     pub methods: Vec<MethodKind>,
     pub sizes: Vec<usize>,
 }
@@ -64,12 +64,12 @@ pub fn axes(study: &StudyResult) -> Axes {
     }
     let mut a = Axes {
         regions: study.regions.iter().map(|r| r.name.clone()).collect(),
-        distributions: Vec::new(),
+        layouts: Vec::new(),
         methods: Vec::new(),
         sizes: study.config.sizes.clone(),
     };
-    for d in &study.config.distributions {
-        push(&mut a.distributions, d);
+    for d in &study.config.layouts {
+        push(&mut a.layouts, d);
     }
     for m in &study.config.methods {
         push(&mut a.methods, m);
@@ -78,14 +78,14 @@ pub fn axes(study: &StudyResult) -> Axes {
     let runs = &study.runs;
     a.regions
         .retain(|r| runs.iter().any(|x| &x.key.region == r));
-    a.distributions
-        .retain(|d| runs.iter().any(|x| x.key.distribution == *d));
+    a.layouts
+        .retain(|d| runs.iter().any(|x| x.key.layout == *d));
     a.methods
         .retain(|m| runs.iter().any(|x| x.key.method == *m));
     a.sizes.retain(|n| runs.iter().any(|x| x.key.n_train == *n));
     for run in runs {
         push(&mut a.regions, &run.key.region);
-        push(&mut a.distributions, &run.key.distribution);
+        push(&mut a.layouts, &run.key.layout);
         push(&mut a.methods, &run.key.method);
         push(&mut a.sizes, &run.key.n_train);
     }
@@ -97,11 +97,11 @@ pub fn axes(study: &StudyResult) -> Axes {
 pub(super) fn runs_of<'a>(
     study: &'a StudyResult,
     region: &'a str,
-    distribution: DistributionKind,
+    layout: LayoutKind,
     n_train: usize,
 ) -> impl Iterator<Item = &'a RunMetrics> + 'a {
     study.runs.iter().filter(move |r| {
-        r.key.region == region && r.key.distribution == distribution && r.key.n_train == n_train
+        r.key.region == region && r.key.layout == layout && r.key.n_train == n_train
     })
 }
 
@@ -110,12 +110,12 @@ pub(super) fn runs_of<'a>(
 pub fn cell_spread(
     study: &StudyResult,
     region: &str,
-    distribution: DistributionKind,
+    layout: LayoutKind,
     method: MethodKind,
     n_train: usize,
     column: &str,
 ) -> Option<Spread> {
-    let values: Vec<f64> = runs_of(study, region, distribution, n_train)
+    let values: Vec<f64> = runs_of(study, region, layout, n_train)
         .filter(|r| r.key.method == method && r.failure.is_none())
         .filter_map(|r| cell(r, study.orientation, column))
         .collect();
@@ -127,12 +127,12 @@ pub fn cell_spread(
 pub fn floor_spread(
     study: &StudyResult,
     region: &str,
-    distribution: DistributionKind,
+    layout: LayoutKind,
     n_train: usize,
 ) -> Option<Spread> {
     let mut seeds = Vec::new();
     let mut values = Vec::new();
-    for r in runs_of(study, region, distribution, n_train) {
+    for r in runs_of(study, region, layout, n_train) {
         if r.failure.is_some() || seeds.contains(&r.key.seed) {
             continue;
         }
@@ -161,7 +161,7 @@ pub struct CurvePoint {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Curve {
     pub region: String,
-    pub distribution: DistributionKind,
+    pub layout: LayoutKind,
     pub method: MethodKind,
     /// Sizes ascending.
     pub points: Vec<CurvePoint>,
@@ -172,42 +172,28 @@ pub fn learning_curves(study: &StudyResult) -> Vec<Curve> {
     let a = axes(study);
     let mut curves = Vec::new();
     for region in &a.regions {
-        for &distribution in &a.distributions {
+        for &layout in &a.layouts {
             for &method in &a.methods {
                 let points: Vec<CurvePoint> = a
                     .sizes
                     .iter()
                     .filter_map(|&n| {
-                        let runs: Vec<&RunMetrics> = runs_of(study, region, distribution, n)
+                        let runs: Vec<&RunMetrics> = runs_of(study, region, layout, n)
                             .filter(|r| r.key.method == method)
                             .collect();
                         (!runs.is_empty()).then(|| CurvePoint {
                             n_train: n,
                             runs: runs.len(),
                             failed: runs.iter().filter(|r| r.failure.is_some()).count(),
-                            truth: cell_spread(
-                                study,
-                                region,
-                                distribution,
-                                method,
-                                n,
-                                "truth_mean_mm",
-                            ),
-                            floor: cell_spread(
-                                study,
-                                region,
-                                distribution,
-                                method,
-                                n,
-                                "floor_mean_mm",
-                            ),
+                            truth: cell_spread(study, region, layout, method, n, "truth_mean_mm"),
+                            floor: cell_spread(study, region, layout, method, n, "floor_mean_mm"),
                         })
                     })
                     .collect();
                 if !points.is_empty() {
                     curves.push(Curve {
                         region: region.clone(),
-                        distribution,
+                        layout,
                         method,
                         points,
                     });

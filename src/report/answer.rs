@@ -11,7 +11,7 @@
 use std::fmt::Write as _;
 
 use crate::calib::registry::MethodKind;
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::error::{Error, Result};
 use crate::study::StudyResult;
 use crate::study::config::REACH_SHARE;
@@ -30,7 +30,7 @@ pub const STATISTICS: [(&str, &str); 2] = [
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cell {
     pub method: MethodKind,
-    pub distribution: DistributionKind,
+    pub layout: LayoutKind,
     /// The fewest training points reaching the target; `None`: not within the sizes studied.
     pub n_train: Option<usize>,
     /// At `n_train` (else at the largest size): runs at or below the target, and runs (seeds).
@@ -98,7 +98,7 @@ pub fn answers(study: &StudyResult) -> Vec<Answer> {
             for &target_mm in &study.config.targets_mm {
                 let mut cells = Vec::new();
                 for &method in &a.methods {
-                    for &d in &a.distributions {
+                    for &d in &a.layouts {
                         if let Some(c) = cell_of(study, &a, region, d, method, statistic, target_mm)
                         {
                             cells.push(c);
@@ -125,7 +125,7 @@ fn cell_of(
     study: &StudyResult,
     a: &Axes,
     region: &str,
-    d: DistributionKind,
+    d: LayoutKind,
     method: MethodKind,
     statistic: &str,
     target_mm: f64,
@@ -162,7 +162,7 @@ fn cell_of(
     };
     Some(Cell {
         method,
-        distribution: d,
+        layout: d,
         n_train,
         reaching,
         seeds,
@@ -207,7 +207,7 @@ fn method_cell(answer: &Answer, method: MethodKind) -> String {
         Some(c) => format!(
             "{} ({})",
             c.n_train.expect("best has points"),
-            c.distribution.name()
+            c.layout.name()
         ),
         None => {
             let mine: Vec<&Cell> = answer.cells.iter().filter(|c| c.method == method).collect();
@@ -271,7 +271,7 @@ pub fn answer_md(study: &StudyResult, out: &mut String) {
                     Some(r) => {
                         let n = r.n_train.expect("recommended has points");
                         vec![
-                            format!("`{}`, {}", r.method, r.distribution.name()),
+                            format!("`{}`, {}", r.method, r.layout.name()),
                             n.to_string(),
                             fmt_hours(c.campaign_hours(n)),
                             spread_text(r.expected),
@@ -320,11 +320,7 @@ fn per_layout_md(study: &StudyResult, a: &Axes, all: &[Answer], region: &str, ou
          {} % of the seeds (— : not within the sizes studied). Every cell of both statistics is in `answer.csv`.\n",
         REACH_SHARE * 100.0
     );
-    let layouts: Vec<String> = a
-        .distributions
-        .iter()
-        .map(|d| d.name().to_string())
-        .collect();
+    let layouts: Vec<String> = a.layouts.iter().map(|d| d.name().to_string()).collect();
     table_header(out, "method", &layouts);
     let these: Vec<&Answer> = all
         .iter()
@@ -332,7 +328,7 @@ fn per_layout_md(study: &StudyResult, a: &Axes, all: &[Answer], region: &str, ou
         .collect();
     for m in &a.methods {
         let row: Vec<String> = a
-            .distributions
+            .layouts
             .iter()
             .map(|&d| {
                 these
@@ -340,7 +336,7 @@ fn per_layout_md(study: &StudyResult, a: &Axes, all: &[Answer], region: &str, ou
                     .map(|x| {
                         x.cells
                             .iter()
-                            .find(|c| c.method == *m && c.distribution == d)
+                            .find(|c| c.method == *m && c.layout == d)
                             .and_then(|c| c.n_train)
                             .map_or("—".to_string(), |n| n.to_string())
                     })
@@ -398,7 +394,7 @@ pub fn answer_text(study: &StudyResult) -> String {
                         let _ = writeln!(
                             out,
                             "  {target:<10} {:<30} {n:>6} {:>6}  {}",
-                            format!("{}, {}", r.method, r.distribution.name()),
+                            format!("{}, {}", r.method, r.layout.name()),
                             fmt_hours(c.campaign_hours(n)),
                             r.expected.map_or("—".into(), |s| fmt_mm(s.median)),
                         );
@@ -449,7 +445,7 @@ pub fn answer_csv(study: &StudyResult) -> Result<Vec<u8>> {
                 x.statistic.to_string(),
                 fmt_target(x.target_mm),
                 c.method.to_string(),
-                c.distribution.name().to_string(),
+                c.layout.name().to_string(),
                 c.n_train.map_or(String::new(), |n| n.to_string()),
                 c.reaching.to_string(),
                 c.seeds.to_string(),

@@ -342,7 +342,7 @@ fn curve_views(study: &StudyResult) -> Vec<Part> {
     let a = axes(study);
     let mut curves = Vec::new();
     for region in &a.regions {
-        for d in &a.distributions {
+        for d in &a.layouts {
             let origin = format!("/curves/{}/{}", sanitize(region), d.name());
             let name = if a.regions.len() > 1 {
                 format!(

@@ -182,7 +182,7 @@ pub fn worse_than_nominal(run: &RunMetrics, study: &StudyResult) -> Option<bool>
     let nominal = study.runs.iter().find(|r| {
         r.key.method == REFERENCE
             && r.key.region == k.region
-            && r.key.distribution == k.distribution
+            && r.key.layout == k.layout
             && r.key.n_train == k.n_train
             && r.key.seed == k.seed
     })?;
@@ -204,7 +204,7 @@ pub fn metrics_csv(study: &StudyResult) -> Result<Vec<u8>> {
         let mut record = vec![
             study.world.name.clone(),
             k.region.clone(),
-            k.distribution.name().to_string(),
+            k.layout.name().to_string(),
             k.method.to_string(),
             k.n_train.to_string(),
             k.seed.to_string(),
@@ -279,7 +279,7 @@ pub fn outside_csv(study: &StudyResult) -> Result<Vec<u8>> {
                 study.world.name.clone(),
                 k.region.clone(),
                 b.use_region.clone(),
-                k.distribution.name().to_string(),
+                k.layout.name().to_string(),
                 k.method.to_string(),
                 k.n_train.to_string(),
                 k.seed.to_string(),

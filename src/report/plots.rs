@@ -103,14 +103,10 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
     let mut out = Vec::new();
     for region in &a.regions {
         let layouts: Vec<_> = a
-            .distributions
+            .layouts
             .iter()
             .copied()
-            .filter(|d| {
-                curves
-                    .iter()
-                    .any(|c| &c.region == region && c.distribution == *d)
-            })
+            .filter(|d| curves.iter().any(|c| &c.region == region && c.layout == *d))
             .collect();
         if layouts.is_empty() {
             continue;
@@ -129,7 +125,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
                     .filter_map(|(i, m)| {
                         curves
                             .iter()
-                            .find(|c| &c.region == region && c.distribution == d && &c.method == m)
+                            .find(|c| &c.region == region && c.layout == d && &c.method == m)
                             .map(|c| (i, c))
                     })
                     .collect();
@@ -404,7 +400,7 @@ pub fn histograms_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>> {
         let title = format!(
             "{method}: test-split position error, region {}, {} layout, {} training points",
             d.region,
-            d.distribution.name(),
+            d.layout.name(),
             d.n_train
         );
         let png = render(&name, (1200, 720), |root| {

@@ -21,7 +21,7 @@
 //! # Entity paths
 //!
 //! Names taken from the scenario (regions, methods) keep `[A-Za-z0-9_.-]`; any other character becomes `_`.
-//! Distributions use their scenario spelling (`uniform`, `latin-hypercube`, …).
+//! Layouts use their scenario spelling (`uniform`, `latin-hypercube`, …).
 //!
 //! | path | archetypes | timeline, rows |
 //! |---|---|---|
@@ -42,7 +42,7 @@
 //! | `world/arrows/after_x<g>_<method>` | `Arrows3D`, error after the detail method × `g` (its own factor) | static |
 //! | `world/grid/<method>` | `Points3D`, the ground-truth grid coloured by the detail method's residual | static |
 //! | `histograms/<method>/before`, `histograms/<method>/after` | `BarChart` (counts; abscissa = bin centres, mm) | static |
-//! | `curves/<region>/<distribution>/<method>` | `SeriesLines` (named `<method> (mm)`, coloured as in the PNG, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train` and `n_train_log`, one row per size with an OK seed |
+//! | `curves/<region>/<layout>/<method>` | `SeriesLines` (named `<method> (mm)`, coloured as in the PNG, static) + `Scalars` (median over OK seeds of the ground-truth mean error, mm) | `n_train` and `n_train_log`, one row per size with an OK seed |
 //! | `legend` | `TextDocument` (markdown): the colour scales and the arrow factor | static |
 //! | `world/trajectory/path` | `LineStrips3D`, the detail trajectory's true reflector path (`[study.trajectory]`) | static |
 //! | `world/trajectory/samples` | `Points3D`, its samples coloured by the detail method's error there | static |
@@ -574,7 +574,7 @@ fn log_histograms(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
     Ok(())
 }
 
-/// The learning curves: per (region, distribution, method), the median over OK seeds of the ground-truth mean
+/// The learning curves: per (region, layout, method), the median over OK seeds of the ground-truth mean
 /// error at each training-set size (mm).
 pub fn learning_curves(
     study: &StudyResult,
@@ -589,7 +589,7 @@ pub fn learning_curves(
         }
         let key = (
             sanitize(&run.key.region),
-            run.key.distribution.name().to_string(),
+            run.key.layout.name().to_string(),
             sanitize(run.key.method.name()),
         );
         groups
@@ -629,8 +629,8 @@ fn log_curves(rec: &RecordingStream, study: &StudyResult) -> Result<()> {
         .iter()
         .map(|m| sanitize(m.name()))
         .collect();
-    for ((region, distribution, method), points) in &curves {
-        let path = format!("curves/{region}/{distribution}/{method}");
+    for ((region, layout, method), points) in &curves {
+        let path = format!("curves/{region}/{layout}/{method}");
         let color = palette(methods.iter().position(|m| m == method).unwrap_or(0));
         rec.log_static(
             path.as_str(),

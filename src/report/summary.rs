@@ -8,7 +8,7 @@
 use std::fmt::Write as _;
 
 use crate::calib::registry::{MethodKind, REFERENCE};
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::error::{Error, Result};
 use crate::study::{RunMetrics, StudyResult};
 
@@ -129,7 +129,7 @@ fn regions_in_words(study: &StudyResult) -> String {
 fn study_in_words(study: &StudyResult, a: &Axes) -> String {
     let c = &study.config;
     let mut out = String::new();
-    let layouts: Vec<&str> = a.distributions.iter().map(|d| d.name()).collect();
+    let layouts: Vec<&str> = a.layouts.iter().map(|d| d.name()).collect();
     let _ = writeln!(
         out,
         "- **Training sets:** {} points (plus {} % as many validation points), placed by {} layout(s): {}; each \
@@ -275,7 +275,7 @@ fn curve_in_words(c: &Curve, last: &CurvePoint, t: f64) -> String {
         Some((n0, t0)) if t0 > (1.0 + PLATEAU_TOLERANCE) * t => format!(
             "still improving at {} points with {} — {} mm, down from {} mm at {n0}; more points would help",
             last.n_train,
-            c.distribution.name(),
+            c.layout.name(),
             fmt_mm(t),
             fmt_mm(t0),
         ),
@@ -283,7 +283,7 @@ fn curve_in_words(c: &Curve, last: &CurvePoint, t: f64) -> String {
             "levels off at {} mm (best layout {}, within {} % from {} points) — more points do not help; its \
              model is the limit",
             fmt_mm(t),
-            c.distribution.name(),
+            c.layout.name(),
             PLATEAU_TOLERANCE * 100.0,
             plateau_from(&c.points).map_or("—".to_string(), |n| n.to_string()),
         ),
@@ -303,7 +303,7 @@ fn smallest_target_in_words(answers: &[Answer], region: &str, method: MethodKind
             "; its smallest target reached is {} mm (mean), from {} points with {}",
             fmt_target(target),
             cell.n_train.expect("best has points"),
-            cell.distribution.name()
+            cell.layout.name()
         ),
         None => "; it reaches none of the targets".to_string(),
     }
@@ -313,7 +313,7 @@ fn smallest_target_in_words(answers: &[Answer], region: &str, method: MethodKind
 /// largest size both have, and the reason its design implies.
 fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
     use crate::design::layout::PointDesign;
-    let Some(designed) = curves.iter().find(|c| c.distribution.selects()) else {
+    let Some(designed) = curves.iter().find(|c| c.layout.selects()) else {
         return String::new();
     };
     let at = |c: &Curve, n: usize| {
@@ -327,7 +327,7 @@ fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
         let mine = p.truth?.median;
         curves
             .iter()
-            .filter(|c| !c.distribution.selects())
+            .filter(|c| !c.layout.selects())
             .filter_map(|c| Some((at(c, p.n_train)?, *c)))
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(other, c)| (p.n_train, mine, other, c))
@@ -364,11 +364,11 @@ fn layout_sentence(kind: MethodKind, curves: &[&Curve]) -> String {
     };
     format!(
         " The {} layout ({}) {verb}: {} against {} mm with {} at {n} points — {why}.",
-        designed.distribution.name(),
+        designed.layout.name(),
         design.describe(),
         fmt_mm(mine),
         fmt_mm(other),
-        geometric.distribution.name(),
+        geometric.layout.name(),
     )
 }
 
@@ -382,12 +382,12 @@ fn same_model_as(method: MethodKind) -> Option<MethodKind> {
 pub fn fmt_observability(
     study: &StudyResult,
     region: &str,
-    distribution: DistributionKind,
+    layout: LayoutKind,
     method: MethodKind,
     n_train: usize,
 ) -> String {
     let median = |column: &str| {
-        cell_spread(study, region, distribution, method, n_train, column).map(|s| s.median)
+        cell_spread(study, region, layout, method, n_train, column).map(|s| s.median)
     };
     match (median("o1"), median("o3"), median("logdet")) {
         (None, None, None) => "—".into(),
@@ -433,15 +433,11 @@ fn observability_md(study: &StudyResult, a: &Axes, out: &mut String) {
     for region in &a.regions {
         for m in &shown {
             let _ = writeln!(out, "#### Region `{region}`, `{m}`\n");
-            let layouts: Vec<String> = a
-                .distributions
-                .iter()
-                .map(|d| d.name().to_string())
-                .collect();
+            let layouts: Vec<String> = a.layouts.iter().map(|d| d.name().to_string()).collect();
             table_header(out, "n_train", &layouts);
             for &n in &a.sizes {
                 let row: Vec<String> = a
-                    .distributions
+                    .layouts
                     .iter()
                     .map(|&d| fmt_observability(study, region, d, *m, n))
                     .collect();

@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 
 use crate::calib::registry::{MethodKind, REFERENCE};
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::study::{RunMetrics, StudyResult};
 
 use super::aggregate::{Axes, Curve, Spread, cell_spread, floor_spread, runs_of, spread};
@@ -77,12 +77,12 @@ pub(super) fn accuracy_tables(study: &StudyResult, a: &Axes, largest: usize, out
             if table == "Table 2" && !study.orientation {
                 continue;
             }
-            let keys: Vec<(MethodKind, DistributionKind)> = a
+            let keys: Vec<(MethodKind, LayoutKind)> = a
                 .methods
                 .iter()
-                .flat_map(|&m| a.distributions.iter().map(move |&d| (m, d)))
+                .flat_map(|&m| a.layouts.iter().map(move |&d| (m, d)))
                 .collect();
-            let value = |m: MethodKind, d: DistributionKind, column: &str| {
+            let value = |m: MethodKind, d: LayoutKind, column: &str| {
                 cell_spread(study, region, d, m, largest, column)
             };
             let columns: Vec<(&str, &str)> = rows
@@ -90,7 +90,7 @@ pub(super) fn accuracy_tables(study: &StudyResult, a: &Axes, largest: usize, out
                 .copied()
                 .filter(|(_, c)| keys.iter().any(|&(m, d)| value(m, d, c).is_some()))
                 .collect();
-            let shown: Vec<&(MethodKind, DistributionKind)> = keys
+            let shown: Vec<&(MethodKind, LayoutKind)> = keys
                 .iter()
                 .filter(|&&(m, d)| columns.iter().any(|(_, c)| value(m, d, c).is_some()))
                 .collect();
@@ -154,7 +154,7 @@ pub(super) fn compact_curves_md(a: &Axes, curves: &[Curve], out: &mut String) {
             let Some((_, c)) = best else {
                 continue;
             };
-            let mut row = vec![c.distribution.name().to_string()];
+            let mut row = vec![c.layout.name().to_string()];
             row.extend(a.sizes.iter().map(|&n| {
                 c.points
                     .iter()
@@ -213,7 +213,7 @@ pub(super) fn worse_md(study: &StudyResult, out: &mut String) {
             out,
             "| `{}` | {} | {} | {} | {} | {} |",
             k.method,
-            k.distribution.name(),
+            k.layout.name(),
             k.n_train,
             k.seed,
             fmt_mm(after),
@@ -244,7 +244,7 @@ fn worse_runs(study: &StudyResult) -> Vec<(&RunMetrics, f64, f64)> {
             n.key.method == REFERENCE
                 && n.failure.is_none()
                 && n.key.region == r.key.region
-                && n.key.distribution == r.key.distribution
+                && n.key.layout == r.key.layout
                 && n.key.n_train == r.key.n_train
                 && n.key.seed == r.key.seed
         });
@@ -278,10 +278,10 @@ pub(super) fn learning_curve_tables(
          column is the oracle's, per seed, over the same campaigns.\n"
     );
     for region in &a.regions {
-        for &d in &a.distributions {
+        for &d in &a.layouts {
             let these: Vec<&Curve> = curves
                 .iter()
-                .filter(|c| &c.region == region && c.distribution == d)
+                .filter(|c| &c.region == region && c.layout == d)
                 .collect();
             if these.is_empty() {
                 continue;
@@ -331,12 +331,11 @@ pub(super) fn outside_md(study: &StudyResult, a: &Axes, out: &mut String) {
     let Some(&largest) = a.sizes.last() else {
         return;
     };
-    let Some(&layout) = a.distributions.first() else {
+    let Some(&layout) = a.layouts.first() else {
         return;
     };
-    let ok = |r: &&RunMetrics| {
-        r.failure.is_none() && r.key.n_train == largest && r.key.distribution == layout
-    };
+    let ok =
+        |r: &&RunMetrics| r.failure.is_none() && r.key.n_train == largest && r.key.layout == layout;
     if !study
         .runs
         .iter()

@@ -10,7 +10,7 @@ use std::fmt::Write;
 use super::aggregate::spread;
 use super::metrics::mm;
 use crate::calib::registry::MethodKind;
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::error::{Error, Result};
 use crate::study::StudyResult;
 use crate::study::trajectory::{TrajectoryRun, label};
@@ -130,7 +130,7 @@ pub fn comparison(study: &StudyResult) -> Vec<Comparison> {
                         r.key.region == region
                             && r.key.method == method
                             && r.key.n_train == n
-                            && r.key.distribution == DistributionKind::Uniform
+                            && r.key.layout == LayoutKind::Uniform
                             && r.key.seed < cfg.seeds
                     })
                     .filter_map(|r| r.truth.as_ref().map(|s| mm(s.mean)))

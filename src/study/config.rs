@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::calib::registry::MethodKind;
-use crate::campaign::{DistributionKind, RegionConfig};
+use crate::campaign::{LayoutKind, RegionConfig};
 use crate::eval::GroundTruthConfig;
 
 /// No ground-truth set, size or test set may ask for more points than this per region.
@@ -43,8 +43,9 @@ pub const REACH_SHARE: f64 = 0.8;
 pub struct StudyConfig {
     /// Training-set sizes (points), each a separate campaign.
     pub sizes: Vec<usize>,
-    /// Point layouts to compare.
-    pub distributions: Vec<DistributionKind>,
+    /// Point layouts to compare; `distributions` is their older name.
+    #[serde(alias = "distributions")]
+    pub layouts: Vec<LayoutKind>,
     /// Methods (named as `calibrate --method` names them); the oracle is always run as the floor.
     pub methods: Vec<MethodKind>,
     /// Repetitions: seeds 0..seeds of the campaign draws (layout, orientations, noise); the robot stays the
@@ -92,7 +93,7 @@ impl StudyConfig {
     /// failing check, in this order, is the one reported.
     pub fn validate(&self, regions: &[RegionConfig]) -> std::result::Result<(), String> {
         self.check_sizes()?;
-        self.check_distributions()?;
+        self.check_layouts()?;
         self.check_methods()?;
         if self.seeds == 0 {
             return Err("seeds = 0: at least one repetition is needed".into());
@@ -126,13 +127,13 @@ impl StudyConfig {
     }
 
     /// The layouts: at least one, none twice.
-    fn check_distributions(&self) -> std::result::Result<(), String> {
-        if self.distributions.is_empty() {
-            return Err("distributions is empty: list at least one layout".into());
+    fn check_layouts(&self) -> std::result::Result<(), String> {
+        if self.layouts.is_empty() {
+            return Err("layouts is empty: list at least one layout".into());
         }
-        for (i, d) in self.distributions.iter().enumerate() {
-            if self.distributions[..i].contains(d) {
-                return Err(format!("distributions: '{}' is listed twice", d.name()));
+        for (i, d) in self.layouts.iter().enumerate() {
+            if self.layouts[..i].contains(d) {
+                return Err(format!("layouts: '{}' is listed twice", d.name()));
             }
         }
         Ok(())
@@ -267,7 +268,7 @@ impl StudyConfig {
 
     fn campaigns(&self, regions: usize) -> u128 {
         (regions as u128)
-            * (self.distributions.len() as u128)
+            * (self.layouts.len() as u128)
             * (self.sizes.len() as u128)
             * (self.seeds as u128)
     }
@@ -289,7 +290,7 @@ impl StudyConfig {
             .map(|&n| self.campaign_points(n) as f64)
             .sum::<f64>()
             * (SIMULATE_S_PER_POINT + methods * FIT_S_PER_POINT);
-        let combos = (regions * self.distributions.len()) as f64 * self.seeds as f64;
+        let combos = (regions * self.layouts.len()) as f64 * self.seeds as f64;
         let sets =
             (self.test_points + self.grid_points + self.shell_points + self.closed_loop_points)
                 as f64;

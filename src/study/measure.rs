@@ -4,9 +4,7 @@
 use rand::RngCore;
 use rand::seq::SliceRandom;
 
-use crate::campaign::{
-    Campaign, CampaignConfig, DistributionKind, Generator, RegionConfig, Selector,
-};
+use crate::campaign::{Campaign, CampaignConfig, Generator, LayoutKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::eval::ground_truth::{GroundTruth, TruthSet};
@@ -17,15 +15,15 @@ use crate::world::World;
 /// The region-level seed index of the test set, far from any layout index.
 pub(super) const TEST_SET: u64 = u64::MAX;
 
-/// The seed of one campaign of the study: region `r`, layout `d` (its place in [`DistributionKind::ALL`]),
+/// The seed of one campaign of the study: region `r`, layout `d` (its place in [`LayoutKind::ALL`]),
 /// training-set size `n` and repetition `s`; the test set uses `d = TEST_SET`.
 pub(super) fn campaign_seed(scenario_seed: u64, r: u64, d: u64, n: u64, s: u64) -> u64 {
     let region_layout = derive(scenario_seed, Stream::Study, &[r, d]).next_u64();
     derive(region_layout, Stream::Study, &[n, s]).next_u64()
 }
 
-pub(super) fn layout_index(d: DistributionKind) -> u64 {
-    DistributionKind::ALL
+pub(super) fn layout_index(d: LayoutKind) -> u64 {
+    LayoutKind::ALL
         .iter()
         .position(|&k| k == d)
         .expect("every layout is in ALL") as u64
@@ -44,7 +42,7 @@ impl Measure<'_> {
     pub(super) fn campaign(
         &self,
         r: usize,
-        layout: DistributionKind,
+        layout: LayoutKind,
         points: usize,
         seed: u64,
     ) -> Result<Campaign> {
@@ -58,14 +56,14 @@ impl Measure<'_> {
     pub(super) fn campaigns(
         &self,
         r: usize,
-        layout: DistributionKind,
+        layout: LayoutKind,
         points: usize,
         seed: u64,
         selectors: &[&dyn Selector],
     ) -> Result<Vec<Result<Campaign>>> {
         let region = RegionConfig {
             points,
-            distribution: layout,
+            layout,
             ..self.regions[r].clone()
         };
         let generator = Generator {

@@ -11,7 +11,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::calib::registry::MethodKind;
-use crate::campaign::{DistributionKind, RegionConfig};
+use crate::campaign::{LayoutKind, RegionConfig};
 use crate::design::Indices;
 use crate::eval::Stats;
 pub use crate::eval::judge::DistanceBand;
@@ -33,7 +33,7 @@ pub use shard::{Shard, StudyPart};
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct RunKey {
     pub region: String,
-    pub distribution: DistributionKind,
+    pub layout: LayoutKind,
     pub method: MethodKind,
     pub n_train: usize,
     pub seed: u64,
@@ -101,7 +101,7 @@ pub struct GridPoint {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Detail {
     pub region: String,
-    pub distribution: DistributionKind,
+    pub layout: LayoutKind,
     pub method: MethodKind,
     pub n_train: usize,
     /// Training and validation points of the campaign.
@@ -121,7 +121,7 @@ pub struct StudyResult {
     pub world: WorldConfig,
     pub config: StudyConfig,
     pub regions: Vec<RegionConfig>,
-    /// Every run, in a fixed order (region, distribution, method, size, seed): independent of threads.
+    /// Every run, in a fixed order (region, layout, method, size, seed): independent of threads.
     pub runs: Vec<RunMetrics>,
     pub detail: Detail,
     /// Whether the campaign measures orientation (three reflectors).

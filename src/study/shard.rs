@@ -95,9 +95,9 @@ pub fn assemble(
                 .copied()
                 .unwrap_or(usize::MAX),
             config
-                .distributions
+                .layouts
                 .iter()
-                .position(|d| *d == k.distribution)
+                .position(|d| *d == k.layout)
                 .unwrap_or(usize::MAX),
             config
                 .methods
@@ -131,7 +131,7 @@ pub fn assemble(
         .max_by_key(|d| d.n_train)
         .unwrap_or_else(|| Detail {
             region: regions[0].name.clone(),
-            distribution: config.distributions[0],
+            layout: config.layouts[0],
             method: config.detail_method().unwrap_or(config.methods[0]),
             n_train: config.sizes.iter().copied().max().unwrap_or(0),
             points: Vec::new(),

@@ -11,7 +11,7 @@
 //! runs with the reason; the sweep goes on.
 //!
 //! Every random draw derives from (scenario seed, region index, layout, size, seed) — the layout's place in
-//! [`DistributionKind::ALL`] and the size and seed values, not their places in the lists — so a run gives the
+//! [`LayoutKind::ALL`] and the size and seed values, not their places in the lists — so a run gives the
 //! same numbers whatever else the study lists, and whatever the thread count.
 
 use std::time::Instant;
@@ -30,7 +30,7 @@ use super::{
 };
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{MethodKind, REFERENCE};
-use crate::campaign::{Campaign, CampaignConfig, DistributionKind, RegionConfig, Selector};
+use crate::campaign::{Campaign, CampaignConfig, LayoutKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
 use crate::design::layout::PointDesign;
 use crate::design::{DesignModel, Indices};
@@ -52,7 +52,7 @@ struct RegionSets {
 #[derive(Clone, Copy)]
 struct Job {
     region: usize,
-    distribution: usize,
+    layout: usize,
     size: usize,
     seed: u64,
 }
@@ -223,7 +223,7 @@ fn selectors<'a>(
                 }),
         );
     }
-    let selectors = if config.distributions.iter().any(|d| d.selects()) {
+    let selectors = if config.layouts.iter().any(|d| d.selects()) {
         layouts
             .iter()
             .map(|d| d.selector(ctx, &world.mounting.nominal, &campaign.selection))
@@ -250,7 +250,7 @@ fn region_sets(measure: &Measure, config: &StudyConfig) -> Result<Vec<RegionSets
         .map(|(r, region)| {
             let seed = campaign_seed(world.seed(), r as u64, TEST_SET, 0, 0);
             let campaign = measure
-                .campaign(r, DistributionKind::Uniform, config.test_points, seed)
+                .campaign(r, LayoutKind::Uniform, config.test_points, seed)
                 .map_err(|e| {
                     Error::Unreachable(format!(
                         "the study's test set of {} points: {}",
@@ -275,12 +275,12 @@ fn region_sets(measure: &Measure, config: &StudyConfig) -> Result<Vec<RegionSets
 fn jobs(regions: usize, config: &StudyConfig, shard: Shard) -> (Vec<usize>, Vec<Job>, usize) {
     let mut jobs = Vec::new();
     for region in 0..regions {
-        for distribution in 0..config.distributions.len() {
+        for layout in 0..config.layouts.len() {
             for size in 0..config.sizes.len() {
                 for seed in 0..config.seeds {
                     jobs.push(Job {
                         region,
-                        distribution,
+                        layout,
                         size,
                         seed,
                     });
@@ -304,7 +304,7 @@ fn in_config_order(outputs: Vec<(Job, JobOutput)>) -> (Vec<RunMetrics>, Option<D
     let mut details = Vec::new();
     for (job, output) in outputs {
         for (m, run) in output.runs {
-            keyed.push(((job.region, job.distribution, m, job.size, job.seed), run));
+            keyed.push(((job.region, job.layout, m, job.size, job.seed), run));
         }
         if let Some(detail) = output.detail {
             details.push(detail);
@@ -327,7 +327,7 @@ impl Shared<'_> {
     fn key(&self, job: Job, m: usize) -> RunKey {
         RunKey {
             region: self.measure.regions[job.region].name.clone(),
-            distribution: self.config.distributions[job.distribution],
+            layout: self.config.layouts[job.layout],
             method: self.kinds[m],
             n_train: self.config.sizes[job.size],
             seed: job.seed,
@@ -386,12 +386,12 @@ impl Shared<'_> {
 
     /// Whether this job's campaign may be the one shown point by point.
     fn is_detail_candidate(&self, job: Job) -> bool {
-        job.region == 0 && job.distribution == 0 && job.seed == 0
+        job.region == 0 && job.layout == 0 && job.seed == 0
     }
 
     fn run(&self, job: Job) -> JobOutput {
         let n = self.config.sizes[job.size];
-        let layout = self.config.distributions[job.distribution];
+        let layout = self.config.layouts[job.layout];
         let region = &self.measure.regions[job.region];
         let seed = campaign_seed(
             self.world.seed(),
@@ -481,7 +481,7 @@ impl Shared<'_> {
     /// training and validation sets; an error when the shared pool cannot be planned.
     fn prepare_designed(&self, job: Job, seed: u64) -> Result<Vec<Result<Prepared>>> {
         let n = self.config.sizes[job.size];
-        let layout = self.config.distributions[job.distribution];
+        let layout = self.config.layouts[job.layout];
         let total = self.config.campaign_points(n);
         Ok(self
             .measure
@@ -494,7 +494,7 @@ impl Shared<'_> {
     /// The job's campaign and its training and validation sets.
     fn prepare(&self, job: Job, seed: u64) -> Result<Prepared> {
         let n = self.config.sizes[job.size];
-        let layout = self.config.distributions[job.distribution];
+        let layout = self.config.layouts[job.layout];
         let total = self.config.campaign_points(n);
         split(
             self.measure.campaign(job.region, layout, total, seed)?,
@@ -639,7 +639,7 @@ impl Shared<'_> {
             .collect();
         Some(Detail {
             region: region.name.clone(),
-            distribution: self.config.distributions[job.distribution],
+            layout: self.config.layouts[job.layout],
             method: self.kinds[self.detail_method],
             n_train: self.config.sizes[job.size],
             points,

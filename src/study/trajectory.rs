@@ -20,7 +20,7 @@ use crate::calib::clock;
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
 use crate::calib::registry::MethodKind;
-use crate::campaign::DistributionKind;
+use crate::campaign::LayoutKind;
 use crate::campaign::config::TrajectoryConfig;
 use crate::campaign::ground_truth::TruePoint;
 use crate::campaign::trajectory::{self, TrajectoryCampaign};
@@ -254,7 +254,7 @@ impl PathContext<'_> {
         let key = campaign_seed(
             self.measure.world.seed(),
             job.r as u64,
-            layout_index(DistributionKind::Uniform),
+            layout_index(LayoutKind::Uniform),
             job.n as u64,
             job.seed,
         );
@@ -318,7 +318,7 @@ impl PathContext<'_> {
     fn measure_path(&self, job: PathJob, key: u64) -> Result<TrajectoryCampaign> {
         let planned = self.measure.campaign(
             job.r,
-            DistributionKind::Uniform,
+            LayoutKind::Uniform,
             self.config.campaign_points(job.n),
             key,
         )?;

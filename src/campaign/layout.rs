@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 
 /// One way of laying out points in the unit cube. Kept object-safe so a scenario can pick layouts by name
 /// at run time and new ones (the model-based optimal selector) slot in beside these.
-pub trait PointDistribution: Send + Sync {
+pub trait PointLayout: Send + Sync {
     fn name(&self) -> &'static str;
     /// About `n` points in the unit cube [0,1]^3 (the caller scales them to a box with side lengths `extent`, metres).
     fn sample(&self, n: usize, extent: [f64; 3], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]>;
@@ -48,7 +48,7 @@ pub struct LatinHypercube;
     serde::Deserialize, serde::Serialize, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash,
 )]
 #[serde(rename_all = "kebab-case")]
-pub enum DistributionKind {
+pub enum LayoutKind {
     Uniform,
     Grid,
     Sobol,
@@ -61,55 +61,55 @@ pub enum DistributionKind {
     DOptimal,
 }
 
-impl DistributionKind {
+impl LayoutKind {
     /// Every kind, for sweeps over all layouts.
-    pub const ALL: [DistributionKind; 5] = [
-        DistributionKind::Uniform,
-        DistributionKind::Grid,
-        DistributionKind::Sobol,
-        DistributionKind::LatinHypercube,
-        DistributionKind::DOptimal,
+    pub const ALL: [LayoutKind; 5] = [
+        LayoutKind::Uniform,
+        LayoutKind::Grid,
+        LayoutKind::Sobol,
+        LayoutKind::LatinHypercube,
+        LayoutKind::DOptimal,
     ];
 
     /// The layouts that place points in the unit cube without knowing the robot.
-    pub const GEOMETRIC: [DistributionKind; 4] = [
-        DistributionKind::Uniform,
-        DistributionKind::Grid,
-        DistributionKind::Sobol,
-        DistributionKind::LatinHypercube,
+    pub const GEOMETRIC: [LayoutKind; 4] = [
+        LayoutKind::Uniform,
+        LayoutKind::Grid,
+        LayoutKind::Sobol,
+        LayoutKind::LatinHypercube,
     ];
 
     /// The layout in the unit cube: for a model-based kind, that of its candidate pool (uniform).
-    pub fn build(self) -> Box<dyn PointDistribution> {
+    pub fn build(self) -> Box<dyn PointLayout> {
         match self {
-            DistributionKind::Uniform | DistributionKind::DOptimal => Box::new(Uniform),
-            DistributionKind::Grid => Box::new(Grid),
-            DistributionKind::Sobol => Box::new(Sobol),
-            DistributionKind::LatinHypercube => Box::new(LatinHypercube),
+            LayoutKind::Uniform | LayoutKind::DOptimal => Box::new(Uniform),
+            LayoutKind::Grid => Box::new(Grid),
+            LayoutKind::Sobol => Box::new(Sobol),
+            LayoutKind::LatinHypercube => Box::new(LatinHypercube),
         }
     }
 
     /// Whether the campaign chooses its points from a candidate pool by a model (see
     /// [`crate::campaign::region::SelectionConfig`]).
     pub fn selects(self) -> bool {
-        self == DistributionKind::DOptimal
+        self == LayoutKind::DOptimal
     }
 
     /// The same spelling as in scenario files, so reports and inputs agree.
     pub fn name(self) -> &'static str {
         match self {
-            DistributionKind::Uniform => "uniform",
-            DistributionKind::Grid => "grid",
-            DistributionKind::Sobol => "sobol",
-            DistributionKind::LatinHypercube => "latin-hypercube",
-            DistributionKind::DOptimal => "d-optimal",
+            LayoutKind::Uniform => "uniform",
+            LayoutKind::Grid => "grid",
+            LayoutKind::Sobol => "sobol",
+            LayoutKind::LatinHypercube => "latin-hypercube",
+            LayoutKind::DOptimal => "d-optimal",
         }
     }
 }
 
-impl PointDistribution for Uniform {
+impl PointLayout for Uniform {
     fn name(&self) -> &'static str {
-        DistributionKind::Uniform.name()
+        LayoutKind::Uniform.name()
     }
 
     fn sample(&self, n: usize, _extent: [f64; 3], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
@@ -119,9 +119,9 @@ impl PointDistribution for Uniform {
     }
 }
 
-impl PointDistribution for Grid {
+impl PointLayout for Grid {
     fn name(&self) -> &'static str {
-        DistributionKind::Grid.name()
+        LayoutKind::Grid.name()
     }
 
     fn sample(&self, n: usize, extent: [f64; 3], _rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
@@ -181,9 +181,9 @@ pub fn grid_counts(n: usize, extent: [f64; 3]) -> [usize; 3] {
 /// Largest sample count for one sobol_burley sequence; longer requests continue with fresh seeds.
 const SOBOL_BLOCK: usize = 1 << 16;
 
-impl PointDistribution for Sobol {
+impl PointLayout for Sobol {
     fn name(&self) -> &'static str {
-        DistributionKind::Sobol.name()
+        LayoutKind::Sobol.name()
     }
 
     fn sample(&self, n: usize, _extent: [f64; 3], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
@@ -202,9 +202,9 @@ impl PointDistribution for Sobol {
     }
 }
 
-impl PointDistribution for LatinHypercube {
+impl PointLayout for LatinHypercube {
     fn name(&self) -> &'static str {
-        DistributionKind::LatinHypercube.name()
+        LayoutKind::LatinHypercube.name()
     }
 
     fn sample(&self, n: usize, _extent: [f64; 3], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
@@ -250,12 +250,12 @@ mod tests {
 
     #[test]
     fn all_points_inside_unit_cube_with_expected_counts() {
-        for kind in DistributionKind::GEOMETRIC {
+        for kind in LayoutKind::GEOMETRIC {
             let d = kind.build();
             for n in [0, 1, 2, 7, 100, 1000] {
                 for extent in EXTENTS {
                     let pts = d.sample(n, extent, &mut rng(11));
-                    if kind == DistributionKind::Grid {
+                    if kind == LayoutKind::Grid {
                         assert!(pts.len() >= n, "{} n={n}", kind.name());
                     } else {
                         assert_eq!(pts.len(), n, "{} n={n}", kind.name());
@@ -383,13 +383,13 @@ mod tests {
 
     #[test]
     fn deterministic_per_seed() {
-        for kind in DistributionKind::GEOMETRIC {
+        for kind in LayoutKind::GEOMETRIC {
             let d = kind.build();
             let a = d.sample(200, [0.5, 0.4, 0.3], &mut rng(42));
             let b = d.sample(200, [0.5, 0.4, 0.3], &mut rng(42));
             let c = d.sample(200, [0.5, 0.4, 0.3], &mut rng(43));
             assert_eq!(a, b, "{}", kind.name());
-            if kind == DistributionKind::Grid {
+            if kind == LayoutKind::Grid {
                 assert_eq!(a, c);
             } else {
                 assert_ne!(a, c, "{}", kind.name());
@@ -399,15 +399,15 @@ mod tests {
 
     #[test]
     fn names_match_scenario_spelling() {
-        for kind in DistributionKind::GEOMETRIC {
+        for kind in LayoutKind::GEOMETRIC {
             assert_eq!(kind.build().name(), kind.name());
         }
-        let alias: DistributionKind = serde_json::from_str("\"o1-optimal\"").unwrap();
-        assert_eq!(alias, DistributionKind::DOptimal);
-        for kind in DistributionKind::ALL {
+        let alias: LayoutKind = serde_json::from_str("\"o1-optimal\"").unwrap();
+        assert_eq!(alias, LayoutKind::DOptimal);
+        for kind in LayoutKind::ALL {
             let json = serde_json::to_string(&kind).unwrap();
             assert_eq!(json, format!("\"{}\"", kind.name()));
-            let back: DistributionKind = serde_json::from_str(&json).unwrap();
+            let back: LayoutKind = serde_json::from_str(&json).unwrap();
             assert_eq!(back, kind);
         }
     }
