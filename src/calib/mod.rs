@@ -8,30 +8,26 @@
 //! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
 //!    — `rigid`; `correction` (ridge models of what a reference prediction leaves: `ResidualCorrection`)
 //!    — `tracker_frame`, `regression`;
-//! 3. `method` (the `Fitted` trait, `MethodInfo` — what a method is —, `Basis`, `FitContext`) — `tracker_frame`,
-//!    `regression`, `error_model`; it knows no method;
-//! 4. the methods, one file (or directory) each: `paper` (`nominal` and the paper's three), `kinematic/`
-//!    (`kinematic`, `elastic`), `residual` (`residual-ridge`, and the hybrids, which are given their fitted base
-//!    and name it by the `MethodInfo` constants of `kinematic`) — `method` and the files above;
-//! 5. `registry` (`MethodKind`, `fit`, `SavedModel`: the list of methods and `model.json`) — everything above.
+//! 3. `method` (the `Method` trait — how a method fits —, the `Fitted` trait, `MethodInfo` — what a method is —,
+//!    `Basis`, `FitContext`) — `tracker_frame`, `regression`, `error_model`; it knows no method;
+//! 4. the methods, one file (or directory) each, each with its `MethodInfo` constants and its `impl Method`:
+//!    `paper` (`nominal` and the paper's three: `Paper`), `kinematic/` (`kinematic`, `elastic`: `Kinematic`),
+//!    `residual` (`residual-ridge`, and `Hybrid`, a base method's prediction plus a residual model) — `method`
+//!    and the files above;
+//! 5. `registry` (the list of methods, which makes `MethodKind`; `SavedModel`: `model.json`) — everything above.
 //!
-//! **Adding a method touches 3 places**, none of them a string or `matches!` outside the method's own file
-//! and the registry:
+//! **Adding a method** is its own file (the model, its `impl Fitted`, its `const …: MethodInfo` — name, summary,
+//! whether it takes extra inputs, its base if it is a hybrid, the robot parameters it identifies — and its
+//! `impl Method`), its `pub mod` below, and one line in the registry's list, `Variant => &TheMethod,`. A method
+//! whose fitted model is of a new type also needs a `SavedModel` variant, with its arms in `SavedModel::of` (a
+//! downcast the compiler does not check: a forgotten type makes `save()` an error naming the method, and the
+//! registry's test that every method saves and loads fails) and `into_fitted` (which calls the model's own
+//! `validate`, since a saved model is input and must fit its own contents before it predicts).
 //!
-//! 1. its own file: the model, its `impl Fitted` and its `const …: MethodInfo` (name, summary, whether it takes
-//!    extra inputs, its base if it is a hybrid, the model its points are designed for — which also says whether
-//!    it has robot parameters);
-//! 2. `calib/mod.rs`: `pub mod …;`;
-//! 3. `calib/registry.rs`: the `MethodKind` variant, its place in `MethodKind::ALL`, its arms in
-//!    `MethodKind::info` and `fit` (the compiler asks for both), and for a new model type a `SavedModel`
-//!    variant with its arms in `SavedModel::of` and `into_fitted` (the first is a downcast the compiler does not
-//!    check: a forgotten type makes `save()` an error naming the method, and the registry's test that every
-//!    method saves and loads fails; the second calls the model's own `validate`, since a saved model is input
-//!    and must fit its own contents before it predicts).
-//!
-//! Everything else asks the descriptor (`MethodKind::info()`): the selection's check that a method has robot
-//! parameters (`campaign::region`), which methods take extra inputs (`bin/real_data`), a hybrid's base
-//! (`report::summary`), the model a campaign is designed for (`design::model`).
+//! Everything else holds a `MethodKind` and asks it: `info()` for what the method is (the selection's check
+//! that a method has robot parameters, which methods take extra inputs, a hybrid's base, the model a campaign
+//! is designed for), `fit()` to fit it. No file outside calib spells a method's name (`house_rules` checks it):
+//! the reports find the uncalibrated reference as `registry::REFERENCE`.
 pub mod clock;
 pub mod correction;
 pub mod domain;
