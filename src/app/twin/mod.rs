@@ -53,7 +53,10 @@ pub struct TwinOptions {
 
 /// The arm as the pilot identifies it.
 pub struct Identified {
+    /// The elastic fit with the prior's pull ([`with_prior`]): what the twin is.
     pub model: KinematicModel,
+    /// Per kept parameter, the fit's own value and standard deviation, before the prior.
+    pub raw: Vec<(f64, f64)>,
     pub geometry: KnownGeometry,
     /// The last DH frame's error, an offset of the flange the URDF chain cannot hold: the probe carries it.
     pub flange: Isometry3<f64>,
@@ -148,8 +151,9 @@ fn elastic_mean(held: &[HeldOut]) -> Option<f64> {
 fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Result<Identified> {
     let labels = random_train_val(pilot.len(), 2.0 / 3.0, seed)?;
     let Parts { train, val, .. } = Parts::of(pilot, labels);
-    let model = KinematicModel::fit(true, ctx, &train, &val)
+    let fitted = KinematicModel::fit(true, ctx, &train, &val)
         .map_err(|e| e.in_data(&pilot.origin, "identifying the arm (elastic fit)"))?;
+    let (model, raw) = with_prior(fitted);
     let ranges: Vec<(f64, f64)> = (0..chain.dof())
         .map(|j| {
             pilot
@@ -172,6 +176,7 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
         })
         .collect();
     Ok(Identified {
+        raw,
         model,
         geometry,
         flange,
@@ -179,6 +184,61 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
         compliance,
         ranges,
     })
+}
+
+/// Typical errors of an arm's joint frames (m, rad), the prior a twin's geometry is drawn toward where the
+/// pilot says little: industrial arms' identified joint-frame errors are 0.1–1 mm and 0.1–1 mrad (Mooring,
+/// Roth and Driels 1991; Nubiola and Bonev 2013 for an ABB IRB 1600); the upper middle, so that what the pilot
+/// determines keeps its value.
+const TYPICAL_FRAME_TRANSLATION_M: f64 = 5e-4;
+const TYPICAL_FRAME_ROTATION_RAD: f64 = 1e-3;
+/// A joint's compliance before the pilot (rad/Nm): that of the cited default stiffness, give or take as much.
+const TYPICAL_COMPLIANCE_RAD_PER_NM: f64 = 1e-5;
+
+/// The fit's geometric errors and compliances, each drawn toward its typical value by what its standard
+/// deviation leaves open: the mean of the posterior with a normal prior of the typical size,
+/// `(v/σ² + μ/τ²) / (1/σ² + 1/τ²)`. A pilot determines some parameters well and others hardly (a fifth of its
+/// size, measured in the pilot's corner of the joint space); taken at face value, the poorly determined ones
+/// act with their full, noisy size wherever the twin is used — on a real UR10, a twin from 200 points of one
+/// series then erred 25–65 % more than the arm on the others. The tracker frame and the mounting are the
+/// registration, not the arm, and stay as fitted. Returns the model and each kept parameter's fitted value and
+/// standard deviation.
+fn with_prior(mut model: KinematicModel) -> (KinematicModel, Vec<(f64, f64)>) {
+    use crate::calib::kinematic::Param;
+    let raw: Vec<(f64, f64)> = model
+        .values
+        .iter()
+        .enumerate()
+        .map(|(k, &v)| (v, model.std.get(k).copied().unwrap_or(f64::NAN)))
+        .collect();
+    for (k, p) in model.kept.clone().iter().enumerate() {
+        let (prior, tau) = match p {
+            Param::Error(e) if e.component <= 3 => (0.0, TYPICAL_FRAME_TRANSLATION_M),
+            Param::Error(_) => (0.0, TYPICAL_FRAME_ROTATION_RAD),
+            Param::Compliance(_) => (TYPICAL_COMPLIANCE_RAD_PER_NM, TYPICAL_COMPLIANCE_RAD_PER_NM),
+            _ => continue,
+        };
+        let (v, sigma) = raw[k];
+        if !(sigma.is_finite() && sigma > 0.0) {
+            continue;
+        }
+        let (wv, wp) = (1.0 / (sigma * sigma), 1.0 / (tau * tau));
+        let pulled = (v * wv + prior * wp) / (wv + wp);
+        model.values[k] = pulled;
+        if let Some(s) = model.std.get_mut(k) {
+            *s = (1.0 / (wv + wp)).sqrt();
+        }
+        match p {
+            Param::Error(e) => model.errors[e.frame - 1][e.component - 1] = pulled,
+            Param::Compliance(j) => {
+                if let Some(c) = model.compliance.as_mut() {
+                    c[*j] = pulled;
+                }
+            }
+            _ => {}
+        }
+    }
+    (model, raw)
 }
 
 /// The twin before its magnitudes are fitted: identified geometry and stiffness, cited magnitudes, the gears'

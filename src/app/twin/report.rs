@@ -33,7 +33,12 @@ fn json_file(
         .iter()
         .zip(&model.values)
         .enumerate()
-        .map(|(k, (p, v))| json!({ "name": p.name(), "value": v, "std": model.std.get(k) }))
+        .map(|(k, (p, v))| {
+            json!({
+                "name": p.name(), "value": v, "std": model.std.get(k),
+                "fitted": identified.raw.get(k).map(|r| r.0), "fitted_std": identified.raw.get(k).map(|r| r.1),
+            })
+        })
         .collect();
     let compliance: Vec<_> = identified
         .compliance
