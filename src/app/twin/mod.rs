@@ -12,6 +12,7 @@ pub mod magnitudes;
 pub mod pilot;
 pub mod report;
 pub mod scenario;
+pub mod thermal;
 
 use std::path::PathBuf;
 
@@ -102,7 +103,7 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
     output::check_dir(&options.out, &OUTPUTS)?;
     let chain = crate::robot::load(&options.robot, options.flange_link.as_deref())?;
     let dh = DhChain::from_chain(&chain)?;
-    let pilot = pilot::read(
+    let (pilot, temperature) = pilot::read(
         &chain,
         &options.robot,
         &options.data,
@@ -126,6 +127,7 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
         repeats: Repeats::of(&pilot),
     };
     let mut values = initial_values(options, &pilot, &identified, &real)?;
+    values.thermal = temperature.map(|t| thermal::warm_up(&t, pilot.time.as_deref()));
     fit_magnitudes(&mut values, &pilot, &ctx, &targets, options.seed)?;
     let statistics = statistics(&values, &pilot, &ctx, real, targets.repeats, options.seed)?;
     let answer = answer::answer_range(&values, options.answer_draws)?;
@@ -295,6 +297,7 @@ fn initial_values(
             .collect(),
         workspace: workspace(pilot, &identified.model),
         targets_mm: targets(real),
+        thermal: None,
     })
 }
 

@@ -34,28 +34,30 @@ pub const FOLDS: usize = 4;
 /// Configurations within this of each other (rad, every joint) are the same pose measured again.
 const REPEAT_TOLERANCE_RAD: f64 = 1e-3;
 
-/// Reads the pilot (through `mapping` for a foreign export), drops its extra inputs when asked, and checks it
-/// against the robot's joint ranges.
+/// Reads the pilot (through `mapping` for a foreign export), checks it against the robot's joint ranges, and
+/// drops its extra inputs when asked — after taking its temperature column, which the twin's warm-up follows
+/// whether or not the methods may regress on it.
 pub fn read(
     chain: &Chain,
     robot: &Path,
     file: &Path,
     mapping: Option<&Path>,
     ignore_inputs: bool,
-) -> Result<Dataset> {
+) -> Result<(Dataset, Option<Vec<f64>>)> {
     let mut data = match mapping {
         Some(m) => ColumnMapping::load(m)?.read(file, chain)?,
         None => Dataset::read(file, &chain.joint_names())?,
     };
-    if ignore_inputs {
-        data.extra_inputs = None;
-    }
     JointRange::of_chain(chain, &robot.display().to_string()).check(
         &data.origin,
         &data.point_ids,
         &data.q,
     )?;
-    Ok(data)
+    let temperature = varying_input(&data, crate::dataset::TEMPERATURE_COLUMN);
+    if ignore_inputs {
+        data.extra_inputs = None;
+    }
+    Ok((data, temperature))
 }
 
 /// Refuses a pilot too small or too narrow to identify the arm, saying how many more points or which joints'

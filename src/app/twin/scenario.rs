@@ -37,6 +37,8 @@ pub struct TwinValues {
     pub workspace: Workspace,
     /// The accuracies the study answers for (mm): between what the pilot's best method and no calibration give.
     pub targets_mm: Vec<f64>,
+    /// The warm-up the pilot's temperature column shows, with where its values come from; none without one.
+    pub thermal: Option<(crate::truth::ThermalProfile, String)>,
 }
 
 /// The box the pilot measured in, and the flange orientations it used.
@@ -119,9 +121,27 @@ impl TwinValues {
         }
         let _ = writeln!(
             out,
-            "# {GEAR_RATIO_SOURCE}\ngear_ratio = {:?}\ndeflection = \"fixed-point\"\n",
+            "# {GEAR_RATIO_SOURCE}\ngear_ratio = {:?}\ndeflection = \"fixed-point\"",
             vec![GEAR_RATIO; n]
         );
+        match &self.thermal {
+            Some((t, source)) => {
+                let _ = writeln!(
+                    out,
+                    "# {source}\nthermal = {{ start_c = {:?}, end_c = {:?}, time_constant_s = {:?}, \
+                     seconds_per_point = {:?}, expansion_per_k = {:?}, reference_c = {:?} }}\n",
+                    t.start_c,
+                    t.end_c,
+                    t.time_constant_s,
+                    t.seconds_per_point,
+                    t.expansion_per_k,
+                    t.reference_c
+                );
+            }
+            None => out.push_str(
+                "# No warm-up: the pilot has no temperature column, or a constant one.\n\n",
+            ),
+        }
         let offset = |o: &Offset| {
             format!(
                 "{{ translation = {:?}, rotation = {:?} }}",
