@@ -510,6 +510,46 @@ fn cases(f: &Fixture) -> Vec<Case> {
         s(&[&p(&missing), "no such directory", "--data-dir"]),
         out,
     );
+
+    // Pilots of `campaign twin`: too few rows, a NaN, a mapping that does not match the file.
+    let iiwa = PathBuf::from("robots/iiwa7.urdf");
+    let nan = f.data_with("twin_nan.csv", |t| {
+        let c = t.col("z1");
+        t.rows[3][c] = "nan".into();
+    });
+    let mapping = PathBuf::from("mappings/ipa_ur10.toml");
+    for (i, (name, pilot, mapping, needles)) in [
+        (
+            "a twin from 40 points",
+            data.clone(),
+            None,
+            s(&["40 points", "40 more"]),
+        ),
+        (
+            "a twin from a pilot with a NaN",
+            nan.clone(),
+            None,
+            s(&[&p(&nan), "row 5", "column z1"]),
+        ),
+        (
+            "a twin through a mapping that does not match",
+            data.clone(),
+            Some(&mapping),
+            s(&[&p(data)]),
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = f.path(&format!("out_twin{i}"));
+        let mut args = os(&[
+            &"twin", &"--robot", &iiwa, &"--data", &pilot, &"--out", &out,
+        ]);
+        if let Some(m) = mapping {
+            args.extend(os(&[&"--mapping", m]));
+        }
+        add(name, CAMPAIGN, args, needles, out);
+    }
     cases
 }
 
