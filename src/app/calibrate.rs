@@ -175,7 +175,13 @@ fn read(options: &FitOptions) -> Result<Inputs> {
     // Measured on the fly, a campaign is corrected for the clock offset first (in `read_measured`); with
     // `--motion-inputs` its motion then becomes the methods' inputs.
     let measured = |path: &Path, mapping: Option<&ColumnMapping>| {
-        let (data, offset) = read_measured(path, mapping, (&chain, &dh), &options.robot, options.ignore_inputs)?;
+        let (data, offset) = read_measured(
+            path,
+            mapping,
+            (&chain, &dh),
+            &options.robot,
+            options.ignore_inputs,
+        )?;
         if !options.motion_inputs {
             return Ok::<_, Error>((data, offset));
         }

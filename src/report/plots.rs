@@ -285,10 +285,7 @@ fn learning_panel(
 
 /// The sizes (x) and errors (y: bands and lines, the floor) a panel shows, positive ones only; `None` when there
 /// is nothing to draw on log axes.
-fn plotted_values(
-    curves: &[(usize, &Band)],
-    floor: &[(f64, f64)],
-) -> Option<(Vec<f64>, Vec<f64>)> {
+fn plotted_values(curves: &[(usize, &Band)], floor: &[(f64, f64)]) -> Option<(Vec<f64>, Vec<f64>)> {
     let mut xs: Vec<f64> = Vec::new();
     let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
     for (_, c) in curves {
