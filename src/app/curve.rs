@@ -171,6 +171,7 @@ pub fn curve(options: &CurveOptions) -> Result<CurveOutcome> {
             data.origin
         ));
     }
+    warnings.extend(outside_warning(&plan.sizes, &found));
     let failed = found.draws.iter().filter(|d| d.error.is_some()).count();
     if failed > 0 {
         warnings.push(format!(
@@ -183,6 +184,33 @@ pub fn curve(options: &CurveOptions) -> Result<CurveOutcome> {
         curve: found,
         out: options.out.clone(),
         warnings,
+    })
+}
+
+/// How many held-out points lie outside the fits' training domains, per size (mean over the successful
+/// fits), when any does: there the models' regressions fade out to their parametric part, so the curve's
+/// small sizes say how a method does mostly beyond its data.
+fn outside_warning(sizes: &[usize], found: &LearningCurve) -> Option<String> {
+    let per_size: Vec<String> = sizes
+        .iter()
+        .filter_map(|&n| {
+            let counts: Vec<usize> = found
+                .draws
+                .iter()
+                .filter(|d| d.size == n)
+                .filter_map(|d| d.outside_domain)
+                .collect();
+            let mean = counts.iter().sum::<usize>() as f64 / counts.len().max(1) as f64;
+            (mean > 0.0).then(|| format!("{mean:.0} at {n} points"))
+        })
+        .collect();
+    (!per_size.is_empty()).then(|| {
+        format!(
+            "of the {} held-out points, these lie outside the fits' training domain (mean over fits; the \
+             regressions fade out there, `calibrate`'s test_points.csv names them): {}",
+            found.n_test,
+            per_size.join(", ")
+        )
     })
 }
 

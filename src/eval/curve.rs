@@ -19,7 +19,7 @@ use serde::Serialize;
 use super::split::{Parts, SplitRule};
 use super::stats::Stats;
 use super::transfer::{self, TestRegistration};
-use crate::calib::method::FitContext;
+use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::MethodKind;
 use crate::dataset::{Dataset, Split, random_split, random_train_val};
 use crate::error::{Error, Result};
@@ -55,6 +55,9 @@ pub struct CurveDraw {
     pub mean_mm: Option<f64>,
     pub p95_mm: Option<f64>,
     pub max_mm: Option<f64>,
+    /// Held-out points outside the model's training domain (`calib::domain`: where its regressions fade out to
+    /// their parametric part); none when the fit failed.
+    pub outside_domain: Option<usize>,
     /// Why the fit or its test failed.
     pub error: Option<String>,
 }
@@ -184,12 +187,13 @@ pub fn learning_curve(
                 let Parts { train, val, .. } = Parts::of(&subset, labels);
                 let model = kind.fit(ctx, &train, &val)?;
                 let e = transfer::evaluate(model.as_ref(), &test, TestRegistration::Model)?;
-                Stats::of(&e.errors.position)
-                    .ok_or_else(|| Error::Invalid("no finite held-out error".into()))
+                let stats = Stats::of(&e.errors.position)
+                    .ok_or_else(|| Error::Invalid("no finite held-out error".into()))?;
+                Ok((stats.scaled(1e3), outside_domain(model.as_ref(), &test)))
             });
-            let (stats, error) = match result {
-                Ok(s) => (Some(s.scaled(1e3)), None),
-                Err(e) => (None, Some(e.to_string())),
+            let (stats, outside, error) = match result {
+                Ok((s, outside)) => (Some(s), Some(outside), None),
+                Err(e) => (None, None, Some(e.to_string())),
             };
             CurveDraw {
                 method: kind,
@@ -198,6 +202,7 @@ pub fn learning_curve(
                 mean_mm: stats.map(|s| s.mean),
                 p95_mm: stats.map(|s| s.p95),
                 max_mm: stats.map(|s| s.max),
+                outside_domain: outside,
                 error,
             }
         })
@@ -207,6 +212,18 @@ pub fn learning_curve(
         n_pool: pool.len(),
         n_test: test.len(),
     })
+}
+
+/// How many points of `test` lie outside `model`'s training domain.
+fn outside_domain(model: &dyn Fitted, test: &Dataset) -> usize {
+    let domain = &model.basis().domain;
+    (0..test.len())
+        .filter(|&i| {
+            !domain
+                .place(model.joint_names(), &test.q[i], test.extra_inputs_of(i))
+                .inside
+        })
+        .count()
 }
 
 /// Per method and size: the mean over the successful draws of their held-out means (mm), their min and
