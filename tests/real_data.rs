@@ -18,6 +18,7 @@ use calibench::calib::tracker_frame::Registration;
 use calibench::dataset::mapping::ColumnMapping;
 use calibench::dataset::{Dataset, Split, random_train_val};
 use calibench::eval::Stats;
+use calibench::eval::curve::{CurvePlan, learning_curve};
 use calibench::eval::protocol::{self, TestSet};
 use calibench::eval::split::SplitRule;
 use calibench::eval::transfer::{self, TestRegistration};
@@ -391,10 +392,21 @@ fn the_protocol_reproduces_the_readme_c_to_d_means() {
         (parts.train.len(), parts.val.len(), parts.test.len()),
         (1387, 693, 693)
     );
-    let err = protocol::curve(&methods, &ctx, &rule, &c, &parts, &[2], 1).unwrap_err();
+    let plan = |sizes: &[usize]| CurvePlan {
+        rule,
+        sizes: sizes.to_vec(),
+        draws: 1,
+    };
+    let err = learning_curve(&methods, &ctx, &plan(&[2]), &c).unwrap_err();
     assert!(
         err.to_string()
-            .contains("learning-curve size 2: between 3 and the 2080 points of the pool"),
+            .contains("--sizes: 2 points: a learning-curve size is between 3"),
+        "{err}"
+    );
+    let err = learning_curve(&methods, &ctx, &plan(&[50, 2081]), &c).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("the largest possible size is 2080"),
         "{err}"
     );
 }

@@ -9,6 +9,7 @@ mod answer;
 mod calibrate;
 mod calibrate_cli;
 mod campaign;
+mod curve;
 mod dataset;
 mod design;
 mod evaluation;

@@ -172,43 +172,29 @@ fn read(options: &FitOptions) -> Result<Inputs> {
         .as_deref()
         .map(ColumnMapping::load)
         .transpose()?;
-    let range = JointRange::of_chain(&chain, &options.robot.display().to_string());
-    let read = |path: &Path, mapping: Option<&ColumnMapping>| -> Result<Dataset> {
-        let mut data = match mapping {
-            Some(m) => m.read(path, &chain)?,
-            None => Dataset::read(path, &chain.joint_names())?,
-        };
-        if options.ignore_inputs {
-            data.extra_inputs = None;
-        }
-        range.check(&data.origin, &data.point_ids, &data.q)?;
-        Ok(data)
-    };
-    // A campaign measured on the fly (a `time` column) is corrected for the clock offset between tracker and
-    // controller first; every method then fits on the corrected samples as on points (calib::clock).
-    let synchronised = |data: Dataset| -> Result<(Dataset, Option<ClockOffset>)> {
-        if data.time.is_none() {
-            return Ok((data, None));
-        }
-        let found = clock::estimate(&dh, &data, CLOCK_BOUND_S)
-            .map_err(|e| e.in_data(&data.origin, "estimating the clock offset"))?;
-        Ok((clock::corrected(&data, found.offset_s)?, Some(found)))
-    };
-    let synchronised = |data: Dataset| -> Result<(Dataset, Option<ClockOffset>)> {
-        let (data, offset) = synchronised(data)?;
+    // Measured on the fly, a campaign is corrected for the clock offset first (in `read_measured`); with
+    // `--motion-inputs` its motion then becomes the methods' inputs.
+    let measured = |path: &Path, mapping: Option<&ColumnMapping>| {
+        let (data, offset) = read_measured(
+            path,
+            mapping,
+            (&chain, &dh),
+            &options.robot,
+            options.ignore_inputs,
+        )?;
         if !options.motion_inputs {
-            return Ok((data, offset));
+            return Ok::<_, Error>((data, offset));
         }
         Ok((with_motion_inputs(&data, &chain, &options.payload)?, offset))
     };
-    let (data, clock_offset) = synchronised(read(&options.data, mapping.as_ref())?)?;
+    let (data, clock_offset) = measured(&options.data, mapping.as_ref())?;
     let test_file = match &options.test_data {
         Some(path) => {
             let test_mapping = match &options.test_mapping {
                 Some(p) => Some(ColumnMapping::load(p)?),
                 None => mapping.clone(),
             };
-            Some(synchronised(read(path, test_mapping.as_ref())?)?.0)
+            Some(measured(path, test_mapping.as_ref())?.0)
         }
         None => None,
     };
@@ -235,6 +221,37 @@ fn read(options: &FitOptions) -> Result<Inputs> {
         truth,
         parts,
     })
+}
+
+/// A measured file as `calibrate` reads it: through `mapping` or in the `measurements.csv` format, without its
+/// extra inputs when `ignore_inputs`, checked against the joint ranges of the robot (read from `robot`), and,
+/// when measured on the fly (a `time` column), corrected for the clock offset between tracker and controller
+/// (`calib::clock`), after which every method fits on the corrected samples as on points.
+pub(super) fn read_measured(
+    path: &Path,
+    mapping: Option<&ColumnMapping>,
+    (chain, dh): (&Chain, &DhChain),
+    robot: &Path,
+    ignore_inputs: bool,
+) -> Result<(Dataset, Option<ClockOffset>)> {
+    let mut data = match mapping {
+        Some(m) => m.read(path, chain)?,
+        None => Dataset::read(path, &chain.joint_names())?,
+    };
+    if ignore_inputs {
+        data.extra_inputs = None;
+    }
+    JointRange::of_chain(chain, &robot.display().to_string()).check(
+        &data.origin,
+        &data.point_ids,
+        &data.q,
+    )?;
+    if data.time.is_none() {
+        return Ok((data, None));
+    }
+    let found = clock::estimate(dh, &data, CLOCK_BOUND_S)
+        .map_err(|e| e.in_data(&data.origin, "estimating the clock offset"))?;
+    Ok((clock::corrected(&data, found.offset_s)?, Some(found)))
 }
 
 /// The method's model, and the nominal model that measures "before" unless the method is the nominal one.

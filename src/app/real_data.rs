@@ -23,13 +23,16 @@ use crate::dataset::Dataset;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
 use crate::error::{Error, Result};
-use crate::eval::protocol::{self, CurveDraw, METHODS, Row, Table, TestSet};
+use crate::eval::curve::{CurveDraw, CurvePlan, learning_curve};
+use crate::eval::protocol::{self, METHODS, Row, Table, TestSet, without_inputs};
 use crate::eval::split::SplitRule;
 use crate::eval::transfer::TestRegistration;
 use crate::eval::{Stats, centre};
 use crate::output;
 use crate::robot::Chain;
 use crate::robot::dh::DhChain;
+
+use super::curve;
 
 /// The files of the three series, under the data set's directory.
 pub const SERIES: [(&str, &str); 3] = [
@@ -59,44 +62,48 @@ struct Report {
     protocol: serde_json::Value,
     across: Vec<(String, Vec<Row>)>,
     within_c: Vec<Row>,
-    curve: Vec<CurveDraw>,
+    curve: Vec<CurvePoint>,
 }
 
-/// Draws per learning-curve size: each draw fits every method once (about a second on this machine), so
-/// a hundred draws of seven sizes already take the better part of an hour.
-pub const MAX_DRAWS: usize = 100;
-/// Learning-curve sizes: at most this many, each at most [`MAX_CURVE_POINTS`] (the series hold a few
-/// thousand points; the pool is checked again against the data).
-pub const MAX_SIZES: usize = 50;
-pub const MAX_CURVE_POINTS: usize = 100_000;
+/// One fit of the learning curve as `real_data.json` has always recorded it: the held-out mean (mm) or why
+/// the fit failed (`calibrate curve`'s curve.csv adds the 95th percentile and the max).
+#[derive(Serialize)]
+struct CurvePoint {
+    method: MethodKind,
+    size: usize,
+    draw: usize,
+    mean_mm: Option<f64>,
+    error: Option<String>,
+}
+
+impl From<CurveDraw> for CurvePoint {
+    fn from(d: CurveDraw) -> CurvePoint {
+        CurvePoint {
+            method: d.method,
+            size: d.size,
+            draw: d.draw,
+            mean_mm: d.mean_mm,
+            error: d.error,
+        }
+    }
+}
 
 impl RealDataOptions {
     /// The counts, before any file is read: a curve of no draws would print a table of nothing.
     pub fn validate(&self) -> Result<()> {
-        let Some(sizes) = &self.sizes else {
-            return Ok(());
-        };
-        if !(1..=MAX_DRAWS).contains(&self.draws) {
-            return Err(Error::Invalid(format!(
-                "--draws {}: between 1 and {MAX_DRAWS} draws per learning-curve size (or --no-curve)",
-                self.draws
-            )));
+        match &self.sizes {
+            None => Ok(()),
+            Some(sizes) => plan(sizes, self.draws).check_counts(),
         }
-        if sizes.is_empty() || sizes.len() > MAX_SIZES {
-            return Err(Error::Invalid(format!(
-                "--sizes: between 1 and {MAX_SIZES} learning-curve sizes, got {}",
-                sizes.len()
-            )));
-        }
-        if let Some(n) = sizes
-            .iter()
-            .find(|&&n| !(3..=MAX_CURVE_POINTS).contains(&n))
-        {
-            return Err(Error::Invalid(format!(
-                "--sizes: {n} points: a learning-curve size is between 3 and {MAX_CURVE_POINTS}"
-            )));
-        }
-        Ok(())
+    }
+}
+
+/// The learning curve's plan: `calibrate`'s default split (seed 0), as the other tables.
+fn plan(sizes: &[usize], draws: usize) -> CurvePlan {
+    CurvePlan {
+        rule: SplitRule::default(),
+        sizes: sizes.to_vec(),
+        draws,
     }
 }
 
@@ -152,7 +159,7 @@ pub fn run(options: &RealDataOptions, show: &mut dyn FnMut(&str)) -> Result<Path
             .map(|t| (t.title, t.rows))
             .collect(),
         within_c: tables.within_c.rows,
-        curve: tables.curve,
+        curve: tables.curve.into_iter().map(CurvePoint::from).collect(),
     };
     let json = serde_json::to_vec_pretty(&report)
         .map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))?;
@@ -203,9 +210,9 @@ pub fn tables(
     let curve = match sizes {
         None => Vec::new(),
         Some(sizes) => {
-            let curve = protocol::curve(methods, ctx, &rule, c, &parts, sizes, draws)?;
-            show(&curve_md(methods, &curve, sizes, parts.test.len()));
-            curve
+            let found = learning_curve(methods, ctx, &plan(sizes, draws), &without_inputs(c))?;
+            show(&curve::markdown(methods, sizes, &found, "series C"));
+            found.draws
         }
     };
     Ok(Tables {
@@ -408,48 +415,6 @@ fn ranges_md(series: &[Dataset], chain: &Chain) -> String {
             }
             None => writeln!(out, " — |"),
         };
-    }
-    out
-}
-
-fn curve_md(methods: &[MethodKind], curve: &[CurveDraw], sizes: &[usize], n_test: usize) -> String {
-    let mut out = format!(
-        "\n#### Learning curve: mean position error (mm) on the {n_test} held-out points of series C, \
-         mean over draws (min–max)\n\n| method |"
-    );
-    for n in sizes {
-        let _ = write!(out, " {n} |");
-    }
-    out += "\n|---|";
-    for _ in sizes {
-        out += "---|";
-    }
-    out += "\n";
-    for kind in methods {
-        let _ = write!(out, "| `{}` |", kind.name());
-        for &n in sizes {
-            let of_cell = || {
-                curve
-                    .iter()
-                    .filter(move |p| p.method == *kind && p.size == n)
-            };
-            let values: Vec<f64> = of_cell().filter_map(|p| p.mean_mm).collect();
-            let failed = of_cell().filter(|p| p.mean_mm.is_none()).count();
-            if values.is_empty() {
-                out += " failed |";
-                continue;
-            }
-            let mean = values.iter().sum::<f64>() / values.len() as f64;
-            let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = values.iter().copied().fold(0.0, f64::max);
-            let note = if failed > 0 {
-                format!(" ({failed} failed)")
-            } else {
-                String::new()
-            };
-            let _ = write!(out, " {mean:.3} ({lo:.3}–{hi:.3}){note} |");
-        }
-        out += "\n";
     }
     out
 }

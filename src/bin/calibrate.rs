@@ -7,7 +7,7 @@
 //! on another campaign, re-registering its tracker frame and probe mounting on its own points.
 //!
 //! `calibrate apply --model model.json --data FILE.csv [--out FILE]`: predicted poses and corrected joint
-//! commands for new joint configurations.
+//! commands for new joint configurations. `calibrate curve` (flags: `--help`): the learning curve of a file.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -16,6 +16,7 @@ use clap::{Args, Parser, Subcommand};
 
 use calibench::app::apply::{self, ApplyOptions};
 use calibench::app::calibrate::{self, FitOptions};
+use calibench::app::curve::{self, CurveOptions};
 use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::eval::split::SplitRule;
@@ -40,6 +41,8 @@ struct Cli {
 enum Command {
     /// Predict poses and corrected joint commands for new configurations with a saved model.
     Apply(ApplyArgs),
+    /// The learning curve of a measured file: held-out errors of random training subsets of growing size.
+    Curve(CurveOptions),
 }
 
 #[derive(Args, Debug)]
@@ -146,6 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             })?;
             (done.text(), done.warnings)
         }
+        Some(Command::Curve(c)) => curve::run(&c)?.text_and_warnings(),
         None => {
             let done = calibrate::fit(&fit_options(cli.fit)?)?;
             (done.text(), done.report.warnings)

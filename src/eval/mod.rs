@@ -8,10 +8,12 @@
 //! - [`oracle`]: the true robot as a method (the floor); [`budget`]: what the errors of a campaign are made of;
 //! - [`split`], [`tables`], [`transfer`], [`protocol`]: measured data split, the paper's Tables 1 and 2, a test
 //!   campaign re-registered on its own points, and fitting on one real series and testing on another;
+//! - [`curve`]: the learning curve of a measured file (`calibrate curve`, and `real_data`'s);
 //! - [`stats`]: mean, max, std, RMS, p95.
 
 pub mod accuracy;
 pub mod budget;
+pub mod curve;
 pub mod ground_truth;
 pub mod judge;
 pub mod oracle;

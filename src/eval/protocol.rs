@@ -1,15 +1,13 @@
 //! The protocol of the real-data tables: every method fitted on one measured series and scored on others
-//! ([`across`]), on a held-out part of the same series ([`within`]), and on that held-out part from growing
-//! subsets of the rest ([`curve`]). The data is split by `calibrate`'s rule ([`super::split`]), so that
-//! `calibrate --test-data` reproduces any row.
+//! ([`across`]) and on a held-out part of the same series ([`within`]); the learning curve on that held-out
+//! part is [`super::curve`]'s, as `calibrate curve` computes it. The data is split by `calibrate`'s rule
+//! ([`super::split`]), so that `calibrate --test-data` reproduces any row.
 //!
 //! Each method is fitted on the joint angles alone, and then, if it regresses on inputs beyond them, again
 //! with the data's extra inputs (e.g. the temperature) offered.
 
 use std::time::Instant;
 
-use rand::seq::SliceRandom;
-use rayon::prelude::*;
 use serde::Serialize;
 
 use super::split::{Parts, SplitRule};
@@ -17,9 +15,8 @@ use super::stats::Stats;
 use super::transfer::{self, TestRegistration, Transfer};
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
-use crate::dataset::{Dataset, Split, random_train_val};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::rng::{Stream, derive};
 
 /// The methods of the tables, in the README's order.
 pub const METHODS: [MethodKind; 9] = MethodKind::ALL;
@@ -60,17 +57,6 @@ pub struct Row {
 pub struct Table {
     pub title: String,
     pub rows: Vec<Row>,
-}
-
-/// One fit of the learning curve: one method on one random training subset of one size.
-#[derive(Clone, Debug, Serialize)]
-pub struct CurveDraw {
-    pub method: MethodKind,
-    pub size: usize,
-    pub draw: usize,
-    /// Test mean position error (mm), or why the fit failed.
-    pub mean_mm: Option<f64>,
-    pub error: Option<String>,
 }
 
 /// The statistics of `transfer` under the name `test`.
@@ -193,64 +179,4 @@ pub fn within(
         parts.test.len()
     );
     Ok((Table { title, rows }, parts))
-}
-
-/// The learning curve: for each size `n` and draw, `n` points drawn from the training and validation part of
-/// `parts` (a split of `data` by [`within`]), split in `rule`'s training fraction, every method fitted on
-/// the joint angles alone and tested on the held-out part. A fit that fails is recorded with its reason.
-pub fn curve(
-    methods: &[MethodKind],
-    ctx: &FitContext,
-    rule: &SplitRule,
-    data: &Dataset,
-    parts: &Parts,
-    sizes: &[usize],
-    draws: usize,
-) -> Result<Vec<CurveDraw>> {
-    let labels = &parts.labels;
-    let pool: Vec<usize> = (0..data.len())
-        .filter(|&i| labels[i] != Split::Test)
-        .collect();
-    let test = without_inputs(&parts.test);
-    let data0 = without_inputs(data);
-    let jobs: Vec<(usize, usize, MethodKind)> = sizes
-        .iter()
-        .flat_map(|&n| (0..draws).flat_map(move |d| methods.iter().map(move |&m| (n, d, m))))
-        .collect();
-    if let Some(&n) = sizes.iter().find(|&&n| n > pool.len() || n < 3) {
-        return Err(Error::Invalid(format!(
-            "learning-curve size {n}: between 3 and the {} points of the pool",
-            pool.len()
-        )));
-    }
-    let fraction = rule.train_fraction();
-    Ok(jobs
-        .par_iter()
-        .map(|&(n, d, kind)| {
-            let mut order = pool.clone();
-            order.shuffle(&mut derive(
-                rule.seed,
-                Stream::Split,
-                &[n as u64, d as u64 + 1],
-            ));
-            let subset = data0.subset(&order[..n]);
-            let result = random_train_val(n, fraction, d as u64).and_then(|labels| {
-                let Parts { train, val, .. } = Parts::of(&subset, labels);
-                let model = kind.fit(ctx, &train, &val)?;
-                let e = transfer::evaluate(model.as_ref(), &test, TestRegistration::Model)?;
-                Ok(Stats::of(&e.errors.position).map(|s| s.mean * 1e3))
-            });
-            let (mean_mm, error) = match result {
-                Ok(m) => (m, None),
-                Err(e) => (None, Some(e.to_string())),
-            };
-            CurveDraw {
-                method: kind,
-                size: n,
-                draw: d,
-                mean_mm,
-                error,
-            }
-        })
-        .collect())
 }

@@ -118,7 +118,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
         let png = render(&name, (pw * cols as u32, ph * rows as u32), |root| {
             let panels = root.split_evenly((rows, cols));
             for (panel, &d) in panels.iter().zip(&layouts) {
-                let these: Vec<(usize, &Curve)> = a
+                let bands: Vec<(usize, Band)> = a
                     .methods
                     .iter()
                     .enumerate()
@@ -126,9 +126,10 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
                         curves
                             .iter()
                             .find(|c| &c.region == region && c.layout == d && &c.method == m)
-                            .map(|c| (i, c))
+                            .map(|c| (i, Band::of_truth(c)))
                     })
                     .collect();
+                let these: Vec<(usize, &Band)> = bands.iter().map(|(i, b)| (*i, b)).collect();
                 let floor: Vec<(f64, f64)> = a
                     .sizes
                     .iter()
@@ -142,6 +143,7 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
                     &format!("region {region}, {} layout", d.name()),
                     &these,
                     &floor,
+                    STUDY_AXES,
                 )?;
             }
             Ok(())
@@ -149,6 +151,49 @@ pub fn learning_curves_png(study: &StudyResult) -> Result<Vec<(String, Vec<u8>)>
         out.push((name, png));
     }
     Ok(out)
+}
+
+/// A method's line and its band, as a learning-curve panel draws them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Band {
+    pub method: MethodKind,
+    /// Per size: the size, then the band's low end, the line, the band's high end.
+    pub points: Vec<[f64; 4]>,
+}
+
+impl Band {
+    /// A study's curve: the median ground-truth mean with its interquartile band, at the sizes where a run
+    /// succeeded.
+    fn of_truth(c: &Curve) -> Band {
+        let points = c
+            .points
+            .iter()
+            .filter_map(|p| p.truth.map(|s| [p.n_train as f64, s.q1, s.median, s.q3]))
+            .collect();
+        Band {
+            method: c.method,
+            points,
+        }
+    }
+}
+
+/// The axis descriptions (x, y) of a study's learning curves.
+const STUDY_AXES: (&str, &str) = (
+    "training points (log scale)",
+    "ground-truth mean error (mm, log scale)",
+);
+
+/// `calibrate curve`'s `curve.png`: per method the line and band of `bands` (the mean over draws of the
+/// held-out mean error with its min–max) against the subset size, on log axes.
+pub fn measured_curve_png(title: &str, bands: &[Band]) -> Result<Vec<u8>> {
+    let these: Vec<(usize, &Band)> = bands.iter().enumerate().collect();
+    let axes = (
+        "points drawn: training + validation (log scale)",
+        "held-out mean error (mm, log scale)",
+    );
+    render("curve.png", (1045, 680), |root| {
+        learning_panel(root, title, &these, &[], axes)
+    })
 }
 
 /// Width of the legend column right of each learning-curve panel (px): outside the plot, so it hides no curve.
@@ -191,13 +236,14 @@ type LogChart<'a, 'b> = ChartContext<
     Cartesian2d<WithKeyPoints<LogCoord<f64>>, WithKeyPoints<LogCoord<f64>>>,
 >;
 
-/// One learning-curve panel: each method's median with its interquartile band, the floor dashed, the legend
-/// in a column of its own.
+/// One learning-curve panel: each method's line with its band, the floor dashed, the legend in a column of its
+/// own; `descs` describe the axes (x, y).
 fn learning_panel(
     whole: &DrawingArea<BitMapBackend, Shift>,
     title: &str,
-    curves: &[(usize, &Curve)],
+    curves: &[(usize, &Band)],
     floor: &[(f64, f64)],
+    descs: (&str, &str),
 ) -> Drawn {
     let (width, _) = whole.dim_in_pixel();
     let (panel, legend) = whole.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
@@ -213,6 +259,7 @@ fn learning_panel(
         &xs,
         (x0 / 1.25, x1 * 1.25),
         (y0 / 1.3, y1 * 2.5),
+        descs,
     )?;
     for &(i, c) in curves {
         draw_curve(&mut chart, c, colour(i))?;
@@ -236,20 +283,15 @@ fn learning_panel(
     draw_legend(&legend, entries)
 }
 
-/// The sizes (x) and errors (y: quartiles and medians, the floor) a panel shows, positive ones only; `None` when
-/// there is nothing to draw on log axes.
-fn plotted_values(
-    curves: &[(usize, &Curve)],
-    floor: &[(f64, f64)],
-) -> Option<(Vec<f64>, Vec<f64>)> {
+/// The sizes (x) and errors (y: bands and lines, the floor) a panel shows, positive ones only; `None` when there
+/// is nothing to draw on log axes.
+fn plotted_values(curves: &[(usize, &Band)], floor: &[(f64, f64)]) -> Option<(Vec<f64>, Vec<f64>)> {
     let mut xs: Vec<f64> = Vec::new();
     let mut ys: Vec<f64> = floor.iter().map(|p| p.1).collect();
     for (_, c) in curves {
         for p in &c.points {
-            if let Some(s) = p.truth {
-                xs.push(p.n_train as f64);
-                ys.extend([s.q1, s.median, s.q3]);
-            }
+            xs.push(p[0]);
+            ys.extend(&p[1..]);
         }
     }
     xs.extend(floor.iter().map(|p| p.0));
@@ -258,13 +300,15 @@ fn plotted_values(
     (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
 }
 
-/// The chart on `panel`, its mesh drawn: x over `x_range` with a tick at each of `xs`, y over `y_range`.
+/// The chart on `panel`, its mesh drawn: x over `x_range` with a tick at each of `xs`, y over `y_range`, the
+/// axes described by `descs` (x, y).
 fn log_chart<'a, 'b>(
     panel: &'a DrawingArea<BitMapBackend<'b>, Shift>,
     title: &str,
     xs: &[f64],
     x_range: (f64, f64),
     (ylo, yhi): (f64, f64),
+    (x_desc, y_desc): (&str, &str),
 ) -> std::result::Result<LogChart<'a, 'b>, Box<dyn StdError>> {
     // Ticks: the training-set sizes on x; 1, 2, 5 × 10^k on y (every digit as a light line).
     let mut sizes: Vec<f64> = xs.to_vec();
@@ -294,8 +338,8 @@ fn log_chart<'a, 'b>(
         )?;
     chart
         .configure_mesh()
-        .x_desc("training points (log scale)")
-        .y_desc("ground-truth mean error (mm, log scale)")
+        .x_desc(x_desc)
+        .y_desc(y_desc)
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| {
             let decimals = (-y.log10().floor()).max(0.0) as usize;
@@ -308,13 +352,13 @@ fn log_chart<'a, 'b>(
     Ok(chart)
 }
 
-/// One method's curve: the interquartile band (a bar when there is a single size), the median line (dashed
-/// for a hybrid) and a dot at each size.
-fn draw_curve(chart: &mut LogChart, c: &Curve, col: RGBColor) -> Drawn {
+/// One method's curve: its band (a bar when there is a single size), its line (dashed for a hybrid) and a dot
+/// at each size.
+fn draw_curve(chart: &mut LogChart, c: &Band, col: RGBColor) -> Drawn {
     let band: Vec<(f64, f64, f64, f64)> = c
         .points
         .iter()
-        .filter_map(|p| p.truth.map(|s| (p.n_train as f64, s.q1, s.median, s.q3)))
+        .map(|p| (p[0], p[1], p[2], p[3]))
         .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0)
         .collect();
     if band.is_empty() {
