@@ -368,10 +368,10 @@ fn cube_file(
     let cube = cube_joints(chain, 0.2);
     let mut q = Vec::new();
     let mut p = Vec::new();
-    for visit in 0..4 {
+    for scatter in SCATTER {
         for (k, joints) in cube.iter().enumerate() {
             let deviation = match k {
-                0 => Vector3::from(SCATTER[visit]) + centre_offset,
+                0 => Vector3::from(scatter) + centre_offset,
                 8 => corner_offset,
                 _ => Vector3::zeros(),
             };
