@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::campaign::{CampaignConfig, RegionConfig};
 use crate::error::{Error, Result};
-use crate::eval::EvaluationConfig;
+use crate::eval::{EvaluationConfig, Iso9283Config};
 use crate::robot::Chain;
 use crate::study::StudyConfig;
 use crate::tracker::TrackerConfig;
@@ -31,6 +31,8 @@ pub struct Scenario {
     pub regions: Vec<RegionConfig>,
     /// What to fit on the campaign and how to judge it; no evaluation when absent.
     pub evaluation: Option<EvaluationConfig>,
+    /// ISO 9283's test cube run with every method the evaluation fits; no test when absent.
+    pub iso9283: Option<Iso9283Config>,
     /// The sweep over training-set sizes, layouts, methods and seeds; no study when absent.
     pub study: Option<StudyConfig>,
     /// Where the scenario came from (its path), for messages; not part of the file.
@@ -56,6 +58,8 @@ struct ScenarioFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     evaluation: Option<EvaluationConfig>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    iso9283: Option<Iso9283Config>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     study: Option<StudyConfig>,
 }
 
@@ -73,6 +77,7 @@ impl From<ScenarioFile> for Scenario {
             campaign: f.campaign,
             regions: f.regions,
             evaluation: f.evaluation,
+            iso9283: f.iso9283,
             study: f.study,
             origin: String::new(),
         }
@@ -92,6 +97,7 @@ impl From<Scenario> for ScenarioFile {
             campaign: s.campaign,
             regions: s.regions,
             evaluation: s.evaluation,
+            iso9283: s.iso9283,
             study: s.study,
         }
     }
@@ -195,6 +201,15 @@ impl Scenario {
             evaluation
                 .validate()
                 .map_err(|m| format!("evaluation: {m}"))?;
+        }
+        if let Some(iso) = &self.iso9283 {
+            if self.evaluation.is_none() {
+                return Err("iso9283: the test commands the arm through the methods [evaluation] fits; add an \
+                            [evaluation] section"
+                    .into());
+            }
+            iso.validate(&self.regions)
+                .map_err(|m| format!("iso9283.{m}"))?;
         }
         if let Some(study) = &self.study {
             study

@@ -15,6 +15,7 @@ mod design;
 mod evaluation;
 mod honest;
 mod identify;
+mod iso9283;
 mod kinematic;
 mod magnitudes;
 mod motion;

@@ -19,6 +19,7 @@ use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
 use crate::dataset::{Dataset, Split, TruthTable};
 use crate::error::{Error, Result};
+use crate::eval::iso_cubes::{self, CubesReport, Side};
 use crate::eval::split::{Parts, SplitRule};
 use crate::eval::tables::{BeforeAfter, BeforeAfterSummary};
 use crate::eval::transfer::{self, TestRegistration};
@@ -310,6 +311,8 @@ struct Judged {
     /// With `--test-registration refit`: the test points through the model's own registration.
     kept: Option<BeforeAfterSummary>,
     truth: Option<(BeforeAfter, BeforeAfterSummary)>,
+    /// ISO 9283's AP and RP on the test points' cubes, where they repeat cube points.
+    iso: Option<CubesReport>,
 }
 
 fn judge(options: &FitOptions, inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
@@ -337,6 +340,18 @@ fn judge_split(inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
             .map_err(|e| e.in_data(origin, "the test split"))?;
         errors = errors.measured_by(&BeforeAfter::of(pair.nominal(), &nominal_obs));
     }
+    let (nominal, registration) = (pair.nominal(), pair.nominal().registration());
+    let iso = iso_cubes::cubes(
+        test,
+        &Side {
+            model: nominal,
+            registration,
+        },
+        &Side {
+            model,
+            registration: model.registration(),
+        },
+    )?;
     Ok(Judged {
         observed,
         summary: errors.summary()?,
@@ -345,6 +360,7 @@ fn judge_split(inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
         refitted: 0,
         kept: None,
         truth: None,
+        iso,
     })
 }
 
@@ -374,6 +390,17 @@ fn judge_campaign(options: &FitOptions, t: &Dataset, pair: &FittedPair) -> Resul
         registration: RegistrationReport::of(&after.registration),
     };
     let errors = BeforeAfter::transferred(&before, &after);
+    let iso = iso_cubes::cubes(
+        t,
+        &Side {
+            model: nominal_model,
+            registration: &before.registration,
+        },
+        &Side {
+            model,
+            registration: &after.registration,
+        },
+    )?;
     Ok(Judged {
         observed,
         summary: errors.summary()?,
@@ -382,6 +409,7 @@ fn judge_campaign(options: &FitOptions, t: &Dataset, pair: &FittedPair) -> Resul
         refitted: after.refitted_parameters(),
         kept,
         truth: None,
+        iso,
     })
 }
 
@@ -466,6 +494,7 @@ fn report(
         worse_than_nominal: false,
         warnings: Vec::new(),
         test_outside_domain: outside,
+        iso9283: judged.iso.clone(),
         clock_offset: inputs.clock_offset.as_ref().map(|c| ClockReport {
             offset_s: c.offset_s,
             rms_mm: c.rms_m * 1e3,
@@ -563,6 +592,9 @@ fn tables(
              {:.4} mm, after calibration {:.4} mm mean ({:.4} mm with the refit above)\n",
             k.before.mean_mm, k.after.mean_mm, report.test.after.mean_mm
         );
+    }
+    if let Some(iso) = &judged.iso {
+        tables += &iso.table();
     }
     if let Some((t, _)) = &judged.truth {
         tables += &t.tables(

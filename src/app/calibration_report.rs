@@ -6,6 +6,7 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::calib::tracker_frame::Registration;
+use crate::eval::iso_cubes::CubesReport;
 use crate::eval::tables::BeforeAfterSummary;
 use crate::eval::transfer::TestRegistration;
 
@@ -51,6 +52,9 @@ pub struct CalibrationReport {
     pub warnings: Vec<String>,
     /// Test points outside the model's training domain (`test_points.csv`).
     pub test_outside_domain: usize,
+    /// ISO 9283's AP and RP on the test data's cubes, where it repeats their points.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iso9283: Option<CubesReport>,
     /// For data measured on the fly (a `time` column): the clock offset removed before fitting (controller minus
     /// tracker, s) and the nominal registration's RMS at it and at zero (mm).
     #[serde(skip_serializing_if = "Option::is_none")]

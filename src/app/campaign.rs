@@ -9,6 +9,7 @@ use serde_json::{Value, json};
 
 use crate::campaign::{Simulation, trajectory};
 use crate::error::{Error, Result};
+use crate::eval::iso9283::{self, Iso9283};
 use crate::eval::{self, Budget, Evaluation, Stats};
 use crate::report::answer::answer_text;
 use crate::report::metrics::worse_than_nominal;
@@ -26,6 +27,7 @@ const OUTPUTS: &[&str] = &[
     "truth.csv",
     "campaign.json",
     "evaluation.json",
+    "iso9283.csv",
     "metrics.csv",
     "outside.csv",
     "answer.csv",
@@ -71,6 +73,8 @@ pub struct CampaignRun {
     pub measured: Stats,
     pub budget: Budget,
     pub evaluation: Option<(Evaluation, Duration)>,
+    /// With `[iso9283]`: the standard's test of every evaluated method.
+    pub iso9283: Option<Iso9283>,
     pub study: Option<(StudyResult, Duration)>,
     /// With `--replay`: what placed the tracker and the reflector.
     pub replay: Option<ReplayReport>,
@@ -97,6 +101,7 @@ pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<Campaign
     };
     if replay.is_some() {
         scenario.evaluation = None;
+        scenario.iso9283 = None;
         scenario.study = None;
     }
     let generated = started.elapsed();
@@ -127,12 +132,15 @@ pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<Campaign
         ("truth.csv".into(), measurements::truth_csv(campaign)?),
         ("campaign.json".into(), to_json("campaign.json", &report)?),
     ];
-    let evaluation = evaluate(&scenario, &sim)?;
+    let (evaluation, iso9283) = evaluate(&scenario, &sim)?;
     if let Some((evaluation, _)) = &evaluation {
         files.push((
             "evaluation.json".into(),
             to_json("evaluation.json", evaluation)?,
         ));
+    }
+    if let Some(iso) = &iso9283 {
+        files.push(("iso9283.csv".into(), iso.csv()?));
     }
     let study = study(&scenario, &sim, options)?;
     if let Some((study, _)) = &study {
@@ -146,6 +154,7 @@ pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<Campaign
         measured,
         budget,
         evaluation,
+        iso9283,
         study,
         replay,
         motion,
@@ -261,14 +270,27 @@ fn campaign_json(
     Ok(report)
 }
 
-/// The scenario's `[evaluation]`, timed, when it has one.
-fn evaluate(scenario: &Scenario, sim: &Simulation) -> Result<Option<(Evaluation, Duration)>> {
+/// An evaluation and how long it took.
+type Timed = (Evaluation, Duration);
+
+/// The scenario's `[evaluation]`, timed, when it has one, and its `[iso9283]` test of the same fitted methods.
+fn evaluate(scenario: &Scenario, sim: &Simulation) -> Result<(Option<Timed>, Option<Iso9283>)> {
     let Some(config) = &scenario.evaluation else {
-        return Ok(None);
+        return Ok((None, None));
     };
     let started = Instant::now();
-    let evaluation = eval::evaluate(sim, &scenario.campaign, &scenario.regions, config)?;
-    Ok(Some((evaluation, started.elapsed())))
+    let (campaign, regions) = (&scenario.campaign, &scenario.regions);
+    let fits = eval::fit_all(sim, config)?;
+    let evaluation = eval::judge_all(sim, campaign, regions, config, &fits)?;
+    let took = started.elapsed();
+    let iso = match &scenario.iso9283 {
+        Some(iso) => Some(
+            iso9283::run(sim, campaign, regions, iso, &fits)
+                .map_err(|e| e.in_scenario(&scenario.origin))?,
+        ),
+        None => None,
+    };
+    Ok((Some((evaluation, took)), iso))
 }
 
 /// The scenario's `[study]`, timed, when it has one: run here, or assembled from the shards' parts.
@@ -353,6 +375,9 @@ impl CampaignRun {
                 evaluation.methods.len(),
                 took.as_secs_f64()
             );
+        }
+        if let Some(iso) = &self.iso9283 {
+            text += &iso.table();
         }
         if let Some((study, took)) = &self.study {
             text += &study_text(study, *took);

@@ -5,14 +5,15 @@
 //! The files import one way, from the bottom up: `points` (what a campaign is made of), `config`, `region` and
 //! `layout` (how a region's points are placed), `generator` (the generator and the true arm's settling),
 //! `sequence` (measuring commands in their order, a replayed campaign), `generate` (planning a campaign:
-//! targets, inverse kinematics, feasibility), and on it `ground_truth` and `selected`. `trajectory` (measuring
-//! on the fly) needs only `points` and `config`.
+//! targets, inverse kinematics, feasibility), and on it `ground_truth`, `iso_cube` (ISO 9283's test cube and
+//! its cycles) and `selected`. `trajectory` (measuring on the fly) needs only `points` and `config`.
 
 pub mod config;
 pub mod layout;
 pub mod generate;
 pub mod generator;
 pub mod ground_truth;
+pub mod iso_cube;
 pub mod points;
 pub mod region;
 mod selected;

@@ -40,6 +40,16 @@ impl Generator<'_> {
     /// feasibility is checked here: a planned campaign chose its stops by their feasibility, and a replayed one
     /// was measured. Points are numbered from 0 in visit order.
     pub fn measure_sequence(&self, stops: &[Stop]) -> Result<Vec<CampaignPoint>> {
+        self.measure_sequence_at(stops, Some(0.0))
+    }
+
+    /// [`Generator::measure_sequence`] begun `start_s` seconds into the true robot's warm-up (`None`: the arm
+    /// warm, [`history::sequence_at`]).
+    pub fn measure_sequence_at(
+        &self,
+        stops: &[Stop],
+        start_s: Option<f64>,
+    ) -> Result<Vec<CampaignPoint>> {
         let robot = &self.world.robot;
         let dof = self.world.nominal.dof();
         if let Some((k, v)) = stops
@@ -53,10 +63,11 @@ impl Generator<'_> {
             )));
         }
         let posture = self.config.posture_rad();
-        let histories = history::sequence(
+        let histories = history::sequence_at(
             &robot.perturbation,
             &posture,
             stops.iter().map(|s| s.q_cmd.as_slice()),
+            start_s,
         );
         let unloaded: Vec<Unloaded> = stops
             .par_iter()

@@ -249,6 +249,37 @@ pub fn evaluate_method(
     Ok(MethodReport::judged(model.info(), &judged, truth))
 }
 
+/// The methods of an `[evaluation]`, each fitted on the campaign's training split (validation for its
+/// hyper-parameters), or why it could not be; the test split is kept for judging them.
+pub struct Fits {
+    /// The split's seed.
+    pub seed: u64,
+    pub train: Dataset,
+    pub val: Dataset,
+    pub test: Dataset,
+    /// In the order of `config.methods`.
+    pub models: Vec<(MethodKind, Result<Box<dyn Fitted>>)>,
+}
+
+/// Fits every method of `config` on the split of the simulated campaign.
+pub fn fit_all(sim: &Simulation, config: &EvaluationConfig) -> Result<Fits> {
+    let seed = config.split_seed.unwrap_or(sim.world.seed());
+    let (train, val, test) = split_campaign(sim, config.split, seed)?;
+    let ctx = FitContext::of(&sim.world);
+    let models = config
+        .methods
+        .par_iter()
+        .map(|&kind| (kind, kind.fit(&ctx, &train, &val)))
+        .collect();
+    Ok(Fits {
+        seed,
+        train,
+        val,
+        test,
+        models,
+    })
+}
+
 /// Fits every method of `config` on the simulated campaign, adds the oracle, and evaluates them all. A method
 /// that cannot be fitted (or evaluated) is reported as failed, with the reason, and the others go on. The
 /// ground truth covers `regions` with the campaign's posture and obstacles (`campaign`).
@@ -258,23 +289,32 @@ pub fn evaluate(
     regions: &[RegionConfig],
     config: &EvaluationConfig,
 ) -> Result<Evaluation> {
+    judge_all(sim, campaign, regions, config, &fit_all(sim, config)?)
+}
+
+/// [`evaluate`] of methods already fitted ([`fit_all`]).
+pub fn judge_all(
+    sim: &Simulation,
+    campaign: &CampaignConfig,
+    regions: &[RegionConfig],
+    config: &EvaluationConfig,
+    fits: &Fits,
+) -> Result<Evaluation> {
     let world = &sim.world;
-    let seed = config.split_seed.unwrap_or(world.seed());
-    let (train, val, test) = split_campaign(sim, config.split, seed)?;
+    let (train, val, test) = (&fits.train, &fits.val, &fits.test);
     let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth())?;
-    let ctx = FitContext::of(world);
-    let mut methods: Vec<MethodReport> = config
-        .methods
+    let mut methods: Vec<MethodReport> = fits
+        .models
         .par_iter()
-        .map(|&kind| {
-            kind.fit(&ctx, &train, &val)
-                .and_then(|model| evaluate_method(model.as_ref(), &test, &truth, &world.robot))
-                .unwrap_or_else(|e| MethodReport::failed(kind.info(), &e))
+        .map(|(kind, model)| match model {
+            Ok(model) => evaluate_method(model.as_ref(), test, &truth, &world.robot)
+                .unwrap_or_else(|e| MethodReport::failed(kind.info(), &e)),
+            Err(e) => MethodReport::failed(kind.info(), e),
         })
         .collect();
-    let oracle = Oracle::new(world)?.registered_on(&[&train, &val])?;
+    let oracle = Oracle::new(world)?.registered_on(&[train, val])?;
     methods.push(
-        evaluate_method(&oracle, &test, &truth, &world.robot)
+        evaluate_method(&oracle, test, &truth, &world.robot)
             .unwrap_or_else(|e| MethodReport::failed(&ORACLE, &e)),
     );
     Ok(Evaluation {
@@ -282,7 +322,7 @@ pub fn evaluate(
         units: "positions in mm, orientations in rad".into(),
         split: SplitReport {
             fractions: config.split,
-            seed,
+            seed: fits.seed,
             train: train.len(),
             val: val.len(),
             test: test.len(),

@@ -162,8 +162,13 @@ impl GroundTruth {
 
     /// World → the registered frame of `model`: `tracker_to_base · T_trk⁻¹`.
     pub fn to_method(&self, model: &dyn Fitted) -> Isometry3<f64> {
-        model.registration().frame.tracker_to_base * self.tracker_pose.inverse()
+        world_to_method(&self.tracker_pose, model)
     }
+}
+
+/// World → the registered frame of `model` measured by a tracker at `tracker_pose` (world ← tracker).
+pub fn world_to_method(tracker_pose: &Isometry3<f64>, model: &dyn Fitted) -> Isometry3<f64> {
+    model.registration().frame.tracker_to_base * tracker_pose.inverse()
 }
 
 impl TruthSet {

@@ -43,6 +43,17 @@ pub fn sequence<'a>(
     start: &[f64],
     commands: impl IntoIterator<Item = &'a [f64]>,
 ) -> Vec<Visit> {
+    sequence_at(perturbation, start, commands, Some(0.0))
+}
+
+/// [`sequence`] begun `start_s` seconds into the thermal profile (the arm has run that long before the first
+/// point); `None`: the arm warm, every point at the profile's end temperature (the arm in use).
+pub fn sequence_at<'a>(
+    perturbation: &Perturbation,
+    start: &[f64],
+    commands: impl IntoIterator<Item = &'a [f64]>,
+    start_s: Option<f64>,
+) -> Vec<Visit> {
     let mut previous_q = start.to_vec();
     let mut direction = vec![FIRST_DIRECTION; start.len()];
     commands
@@ -54,7 +65,10 @@ pub fn sequence<'a>(
             previous_q.extend_from_slice(q);
             Visit {
                 direction: direction.clone(),
-                temperature: perturbation.thermal.as_ref().map(|t| t.temperature(k)),
+                temperature: perturbation.thermal.as_ref().map(|t| match start_s {
+                    Some(s) => t.temperature_at(s + k as f64 * t.seconds_per_point),
+                    None => t.end_c,
+                }),
             }
         })
         .collect()
