@@ -1,5 +1,5 @@
 //! `real_data [--data-dir DIR] [--out DIR]`: every calibration method on the real UR10 laser-tracker campaigns
-//! of Landgraf et al. (IEEE CASE 2021; `../shared/data/ipa-ur10`), read through `mappings/ipa_ur10.toml`.
+//! of Landgraf et al. (IEEE CASE 2021; `data/ipa-ur10`), read through `mappings/ipa_ur10.toml`.
 //! Prints the README's tables as Markdown and writes them to `DIR/real_data.json`:
 //!
 //! 1. **Across campaigns**: fitted on all of series C (training 2/3, validation 1/3, split seed 0) and tested
@@ -33,8 +33,9 @@ use calibench::app::sim_vs_real;
     allow_negative_numbers = true
 )]
 struct Cli {
-    /// The data set's directory (Series_B, Series_C, Series_D), relative to the current directory.
-    #[arg(long, default_value = "../shared/data/ipa-ur10")]
+    /// The data set's directory (Series_B, Series_C, Series_D), relative to the current directory: the copy
+    /// in the repository by default.
+    #[arg(long, default_value = "data/ipa-ur10")]
     data_dir: PathBuf,
     /// Column mapping of the series (built in: works from any directory).
     #[arg(long, default_value = "mappings/ipa_ur10.toml")]
