@@ -11,6 +11,7 @@ mod calibrate_cli;
 mod campaign;
 mod dataset;
 mod design;
+mod doc_commands;
 mod evaluation;
 mod honest;
 mod identify;
