@@ -437,7 +437,7 @@ fn mapping_examples_read_alike() {
             (None, None) => {}
         }
     }
-    let chain = calibench::robot::load(&root.join("robots/ur10.urdf"), None).unwrap();
+    let chain = calibench::robot::load(root.join("robots/ur10.urdf"), None).unwrap();
     let mut read = Vec::new();
     for pair in blocks.windows(2) {
         let [(kind, mapping), (next, export)] = pair else {
