@@ -1,7 +1,6 @@
 //! `cargo bench --bench twin`: `campaign twin` on a 200-row pilot, whole: reading, identification, the
 //! magnitudes' fit, the pilot's statistics over the twin's draws, the answer over 5 draws of the twin's study,
-//! the files. The pilot is the first 200 rows of the real UR10 series C (in the repository's `data/`, or
-//! `../shared/data/` beside it). Median of 3 runs on every core; the figure is for the docs, not an assertion.
+//! the files. The pilot is the first 200 rows of the real UR10 series C (the repository's `data/ipa-ur10`). Median of 3 runs on every core; the figure is for the docs, not an assertion.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -10,10 +9,9 @@ use calibench::app::twin::{self, TwinOptions};
 use calibench::robot::Payload;
 
 fn series_c() -> Option<PathBuf> {
-    ["data", "../shared/data"]
-        .iter()
-        .map(|d| Path::new(d).join("ipa-ur10/Series_C/measurements_random_poses.csv"))
-        .find(|p| p.is_file())
+    let c = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/ipa-ur10/Series_C/measurements_random_poses.csv");
+    c.is_file().then_some(c)
 }
 
 fn main() {

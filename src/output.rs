@@ -56,38 +56,6 @@ pub fn check_dir(dir: &Path, replaces: &[&str]) -> Result<()> {
     Destination::of(dir)?.check_replaceable(replaces)
 }
 
-/// Writes one file atomically: a temporary beside it (`.NAME.tmp-PID`), renamed over it. Refuses a path
-/// that names a directory (`out/`, or an existing directory).
-pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    if ends_with_separator(path) || path.is_dir() {
-        return Err(out_err(
-            path,
-            "is a directory; a file name is needed (such as DIR/applied.csv)",
-        ));
-    }
-    let name = file_name(path)?;
-    let parent = parent_of(path);
-    fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
-    // Temporaries of runs that died: their process is gone.
-    let prefix = format!(".{name}.tmp-");
-    for (entry, pid) in hidden_with_pid(&parent, &prefix) {
-        if !process_alive(pid) {
-            let _ = fs::remove_file(entry);
-        }
-    }
-    let temp = parent.join(format!("{prefix}{}", std::process::id()));
-    let result = (|| {
-        let mut f = fs::File::create(&temp).map_err(|e| Error::io(&temp, e))?;
-        f.write_all(bytes).map_err(|e| Error::io(&temp, e))?;
-        f.sync_all().map_err(|e| Error::io(&temp, e))?;
-        fs::rename(&temp, path).map_err(|e| Error::io(path, e))
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temp);
-    }
-    result
-}
-
 fn write_into<N: AsRef<str>>(temp: &Path, files: &[(N, Vec<u8>)]) -> Result<()> {
     fs::create_dir(temp).map_err(|e| Error::io(temp, e))?;
     for (name, bytes) in files {
@@ -351,7 +319,9 @@ fn exchange(_: &Path, _: &Path) -> std::io::Result<()> {
     Err(std::io::ErrorKind::Unsupported.into())
 }
 
-/// Whether process `pid` still runs (assumed so where this cannot be told).
+/// Whether process `pid` still runs (assumed so where this cannot be told). Only the lock without `flock`
+/// needs it.
+#[cfg(not(unix))]
 fn process_alive(pid: u32) -> bool {
     if pid == std::process::id() {
         return true;
@@ -380,11 +350,6 @@ fn hidden_with_pid(dir: &Path, prefix: &str) -> Vec<(PathBuf, u32)> {
 
 fn top_level(name: &str) -> &str {
     name.split(['/', '\\']).next().unwrap_or(name)
-}
-
-fn ends_with_separator(path: &Path) -> bool {
-    let s = path.as_os_str().to_string_lossy();
-    s.ends_with('/') || s.ends_with(std::path::MAIN_SEPARATOR)
 }
 
 fn file_name(path: &Path) -> Result<&str> {
@@ -456,14 +421,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("is a file, not a directory"), "{e}");
-
-        let dir_slash = PathBuf::from(format!("{}/", home.display()));
-        let e = write_file(&dir_slash, b"x").unwrap_err().to_string();
-        assert!(e.contains("is a directory"), "{e}");
-        let e = write_file(&root.path().join("new/"), b"x")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("is a directory"), "{e}");
     }
 
     #[test]

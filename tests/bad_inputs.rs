@@ -137,7 +137,17 @@ impl Fixture {
         assert_eq!(code, Some(0), "the fixture campaign: {err}");
         let fit = dir.path().join("fit");
         let data = campaign.join("measurements.csv");
-        let (code, err) = run(CALIBRATE, &os(&[&"--data", &data, &"--out", &fit]));
+        let (code, err) = run(
+            CALIBRATE,
+            &os(&[
+                &"--data",
+                &data,
+                &"--method",
+                &"paper-rotxyz",
+                &"--out",
+                &fit,
+            ]),
+        );
         assert_eq!(code, Some(0), "the fixture fit: {err}");
         Fixture {
             model: fit.join("model.json"),
@@ -430,7 +440,7 @@ fn cases(f: &Fixture) -> Vec<Case> {
         ),
     ];
     for (i, (name, model, input, mut needles)) in applies.into_iter().enumerate() {
-        let out = f.path(&format!("out_apply{i}.csv"));
+        let out = f.path(&format!("out_apply{i}"));
         needles.push(p(if name.starts_with("apply") {
             &input
         } else {
@@ -473,15 +483,14 @@ fn cases(f: &Fixture) -> Vec<Case> {
         s(&[&p(&a_file), "is a file"]),
         a_file.clone(),
     );
-    let slash = format!("{}/", f.path("applied_dir").display());
     add(
-        "apply --out dir/",
+        "apply --out naming an existing file",
         CALIBRATE,
         os(&[
-            &"apply", &"--model", &f.model, &"--data", data, &"--out", &slash,
+            &"apply", &"--model", &f.model, &"--data", data, &"--out", &a_file,
         ]),
-        s(&[&slash, "is a directory"]),
-        f.path("applied_dir"),
+        s(&[&p(&a_file), "is a file, not a directory"]),
+        a_file.clone(),
     );
 
     // Flags whose real check must speak (not the argument parser's negative-number rule).

@@ -15,6 +15,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
+
+use calibench::calib::registry::RECOMMENDED;
 use tempfile::TempDir;
 
 const PAPER: &str = include_str!("../scenarios/paper_iiwa.toml");
@@ -59,7 +61,7 @@ fn calibrate(args: &[&OsStr]) -> Output {
     run_bin(env!("CARGO_BIN_EXE_calibrate"), args)
 }
 
-/// `calibrate apply --model MODEL --data DATA --out OUT`.
+/// `calibrate apply --model MODEL --data DATA --out DIR` (DIR/applied.csv).
 fn apply_model(model: &Path, data: &Path, out: &Path) -> Output {
     calibrate(&[
         "apply".as_ref(),
@@ -341,7 +343,12 @@ fn truth_adds_a_truth_section() {
     let stdout = fit_ok(
         &data.join("measurements.csv"),
         &out,
-        &["--truth", truth.to_str().unwrap()],
+        &[
+            "--method",
+            "paper-rotxyz",
+            "--truth",
+            truth.to_str().unwrap(),
+        ],
     );
     assert!(
         stdout.contains("Table 1"),
@@ -367,7 +374,12 @@ fn nest_reports_orientation_and_prints_table_2() {
     let stdout = fit_ok(
         &data.join("measurements.csv"),
         &out,
-        &["--truth", truth.to_str().unwrap()],
+        &[
+            "--method",
+            "paper-rotxyz",
+            "--truth",
+            truth.to_str().unwrap(),
+        ],
     );
     assert!(
         stdout.contains("Table 1"),
@@ -428,13 +440,14 @@ fn a_split_column_is_honoured() {
     let with_split = dir.path().join("with_split.csv");
     table.write(&with_split);
     let out = dir.path().join("out");
-    // --split applies only without a split column.
+    // --split applies only without a split column. No --method: the default is the recommended one.
     fit_ok(
         &with_split,
         &out,
         &["--split", "0.8,0.1,0.1", "--seed", "7"],
     );
     let report = json(&out.join("report.json"));
+    assert_eq!(report["method"], RECOMMENDED.name(), "the default method");
     assert_eq!(
         (
             count(&report, "n_train"),
@@ -463,11 +476,11 @@ fn a_split_column_is_honoured() {
 /// are close to the input with a negligible residual. Returns the largest command change (rad).
 fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
     let out = dir.path().join("fit");
-    fit_ok(data, &out, &[]);
+    fit_ok(data, &out, &["--method", "paper-rotxyz"]);
     let model = out.join("model.json");
     let apply_dir = dir.path().join("apply");
     let applied = apply_dir.join("applied.csv");
-    let output = apply_model(&model, data, &applied);
+    let output = apply_model(&model, data, &apply_dir);
     assert!(
         output.status.success(),
         "apply failed: {}",
@@ -665,18 +678,18 @@ fn apply_with_a_file_that_is_not_a_model_is_one_line() {
     let dir = TempDir::new().unwrap();
     let data = campaign(&dir, "paper", &small_paper(40));
     let fit = dir.path().join("fit");
-    fit_ok(&data.join("measurements.csv"), &fit, &[]);
+    fit_ok(
+        &data.join("measurements.csv"),
+        &fit,
+        &["--method", "paper-rotxyz"],
+    );
     let apply_dir = dir.path().join("apply");
     for not_a_model in [
         fit.join("report.json"),
         data.join("campaign.json"),
         data.join("measurements.csv"),
     ] {
-        let output = apply_model(
-            &not_a_model,
-            &data.join("measurements.csv"),
-            &apply_dir.join("applied.csv"),
-        );
+        let output = apply_model(&not_a_model, &data.join("measurements.csv"), &apply_dir);
         let name = not_a_model.file_name().unwrap().to_str().unwrap();
         assert_clean_failure(&output, &apply_dir, &[name]);
     }
@@ -725,8 +738,9 @@ fn apply_reports_a_singular_configuration_per_row() {
         ),
     )
     .unwrap();
-    let applied = dir.path().join("applied.csv");
-    let output = apply_model(&fitted.join("model.json"), &joints, &applied);
+    let applied_dir = dir.path().join("applied");
+    let applied = applied_dir.join("applied.csv");
+    let output = apply_model(&fitted.join("model.json"), &joints, &applied_dir);
     assert!(
         output.status.success(),
         "{}",
@@ -788,7 +802,7 @@ fn apply_refuses_a_model_that_does_not_fit_itself() {
     let data = campaign(&dir, "paper", &ideal).join("measurements.csv");
     let apply = |model: &Path, name: &str| {
         let out = dir.path().join(format!("apply_{name}"));
-        let output = apply_model(model, &data, &out.join("applied.csv"));
+        let output = apply_model(model, &data, &out);
         (output, out)
     };
     type Change = fn(&mut Value);
@@ -982,6 +996,8 @@ fn a_campaign_measured_on_the_fly_is_synchronised_by_calibrate() {
         stop_and_go.join("measurements.csv").as_os_str(),
         "--out".as_ref(),
         no_rates.as_os_str(),
+        "--method".as_ref(),
+        "paper-rotxyz".as_ref(),
         "--motion-inputs".as_ref(),
     ]);
     assert_clean_failure(&output, &no_rates, &["qd_<joint>", "measurements.csv"]);

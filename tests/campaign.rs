@@ -576,3 +576,39 @@ fn a_sequence_is_measured_in_its_order_with_lost_motion() {
         .norm();
     assert!(gap > 2e-5, "opposite approaches differ: {gap} m");
 }
+
+/// `scenarios/own_robot_6dof.toml`, the template for a user's own arm, parses whole (its study too) and runs:
+/// a 60-point campaign of it, without its study, measures every point, and the arm errs well above the
+/// tracker's noise (0.02 mm a point), so the template's error sources are on. (It measures 0.14 mm, the
+/// figure the template states.)
+#[test]
+fn the_own_robot_template_parses_and_runs_a_small_campaign() {
+    use calibench::app::campaign::{self, CampaignOptions};
+    use calibench::scenario::Scenario;
+    let text = include_str!("../scenarios/own_robot_6dof.toml");
+    let full = Scenario::parse(text, "own_robot_6dof.toml").unwrap();
+    assert!(full.study.is_some(), "the template carries a study");
+    let small = edit(text, "points = 1000", "points = 60");
+    let small = &small[..small.find("[study]").expect("a [study] section")];
+    let scenario = Scenario::parse(small, "small own_robot_6dof").unwrap();
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("own");
+    let done = campaign::run(
+        scenario,
+        &CampaignOptions {
+            out: Some(out.clone()),
+            timings: false,
+            replay: None,
+            long: false,
+            parts: None,
+        },
+    )
+    .unwrap();
+    assert_eq!(done.measured.n, 60);
+    let mean_mm = done.measured.mean * 1e3;
+    assert!(
+        (0.25..=2.0).contains(&mean_mm),
+        "measured mean {mean_mm} mm"
+    );
+    assert!(out.join("measurements.csv").is_file());
+}

@@ -415,3 +415,91 @@ fn joints_only_files_and_byte_order_mark() {
     let d = read("\u{feff}j1,j2,x1,y1,z1\n0,0,1,2,3\n", &j).unwrap();
     assert_eq!(d.q, [[0.0, 0.0]]);
 }
+
+/// `mappings/README.md`'s examples: each `toml` block is a mapping, followed by a `csv` block of the export it
+/// reads; every example describes the same measurement, so all must read to the same joint angles, point and
+/// (where mapped) orientation and temperature; a block whose first line names a shipped file is that file.
+#[test]
+fn mapping_examples_read_alike() {
+    use calibench::dataset::mapping::ColumnMapping;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let page = std::fs::read_to_string(root.join("mappings/README.md")).unwrap();
+    let mut blocks: Vec<(String, String)> = Vec::new();
+    let mut current: Option<(String, String)> = None;
+    for line in page.lines() {
+        match (line.strip_prefix("```"), &mut current) {
+            (Some(info), None) => current = Some((info.trim().to_string(), String::new())),
+            (Some(_), Some(_)) => blocks.push(current.take().unwrap()),
+            (None, Some((_, text))) => {
+                text.push_str(line);
+                text.push('\n');
+            }
+            (None, None) => {}
+        }
+    }
+    let chain = calibench::robot::load(root.join("robots/ur10.urdf"), None).unwrap();
+    let mut read = Vec::new();
+    for pair in blocks.windows(2) {
+        let [(kind, mapping), (next, export)] = pair else {
+            unreachable!()
+        };
+        if kind != "toml" {
+            continue;
+        }
+        assert_eq!(
+            next, "csv",
+            "a mapping example without its export:\n{mapping}"
+        );
+        let parsed = ColumnMapping::from_toml(mapping, "mappings/README.md").unwrap();
+        if let Some(file) = mapping.lines().next().and_then(|l| l.strip_prefix("# "))
+            && file.starts_with("mappings/")
+        {
+            assert_eq!(
+                parsed,
+                ColumnMapping::load(&root.join(file)).unwrap(),
+                "{file}"
+            );
+        }
+        let data = parsed
+            .from_reader(export.as_bytes(), "example", &chain)
+            .unwrap();
+        read.push((parsed, data));
+    }
+    assert!(read.len() >= 3, "{} examples", read.len());
+    let (_, first) = &read[0];
+    for (mapping, data) in &read {
+        assert_eq!(data.q.len(), 1);
+        for (a, b) in data.q[0].iter().zip(&first.q[0]) {
+            assert!(
+                (a - b).abs() < 1e-9,
+                "joints {:?} against {:?}",
+                data.q[0],
+                first.q[0]
+            );
+        }
+        let distance = (data.measured[0][0] - first.measured[0][0]).norm();
+        assert!(distance < 1e-9, "point off by {distance} m");
+        if let (Some(o), Some(f)) = (&data.measured_orientation, &first.measured_orientation) {
+            assert!(
+                o[0].angle_to(&f[0]) < 1e-8,
+                "orientation off by {} rad",
+                o[0].angle_to(&f[0])
+            );
+        }
+        if let (Some(i), Some(f)) = (&data.extra_inputs, &first.extra_inputs) {
+            assert!((i.values[0][0] - f.values[0][0]).abs() < 1e-6);
+        }
+        assert_eq!(
+            data.base_frame,
+            mapping.position.frame == calibench::dataset::mapping::PositionFrame::Base
+        );
+    }
+    assert!(first.measured_orientation.is_some());
+    assert!(
+        read.iter()
+            .filter(|(_, d)| d.measured_orientation.is_some())
+            .count()
+            >= 2
+    );
+    assert!(read.iter().any(|(_, d)| d.base_frame));
+}

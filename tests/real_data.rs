@@ -1,5 +1,5 @@
 //! The real UR10 laser-tracker campaigns (C. Landgraf et al., IEEE CASE 2021, MIT licence;
-//! `../shared/data/ipa-ur10`) read through `mappings/ipa_ur10.toml`: the mapping gives the file's first rows
+//! `data/ipa-ur10`) read through `mappings/ipa_ur10.toml`: the mapping gives the file's first rows
 //! in metres and radians, the Euler convention is the right one, a bad mapping or a bad cell is one clear
 //! line, the 6-DoF probe's orientation is modelled, and the README's C → D numbers reproduce.
 
@@ -28,7 +28,7 @@ use calibench::robot::{Chain, urdf};
 const MAPPING: &str = include_str!("../mappings/ipa_ur10.toml");
 
 fn data_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/ipa-ur10")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/ipa-ur10")
 }
 
 fn series(name: &str) -> PathBuf {
@@ -474,7 +474,8 @@ fn apply_reads_through_the_mapping() {
         "{}",
         String::from_utf8_lossy(&fit.stderr)
     );
-    let applied = dir.path().join("applied.csv");
+    let applied_dir = dir.path().join("applied");
+    let applied = applied_dir.join("applied.csv");
     let output = run(&[
         "apply".as_ref(),
         "--model".as_ref(),
@@ -484,7 +485,7 @@ fn apply_reads_through_the_mapping() {
         "--data".as_ref(),
         joints.as_os_str(),
         "--out".as_ref(),
-        applied.as_os_str(),
+        applied_dir.as_os_str(),
     ]);
     assert!(
         output.status.success(),

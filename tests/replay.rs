@@ -18,7 +18,7 @@ fn root() -> PathBuf {
 }
 
 fn series_c() -> PathBuf {
-    root().join("../shared/data/ipa-ur10/Series_C/measurements_random_poses.csv")
+    root().join("data/ipa-ur10/Series_C/measurements_random_poses.csv")
 }
 
 fn ur10_ipa() -> Scenario {
@@ -37,12 +37,9 @@ fn ur10_series() -> (
     let chain = urdf::load_file(root().join("robots/ur10.urdf"), None).unwrap();
     let dh = calibench::robot::dh::DhChain::from_chain(&chain).unwrap();
     let mapping = ColumnMapping::load(&root().join("mappings/ipa_ur10.toml")).unwrap();
-    let real = calibench::app::real_data::read_series(
-        &root().join("../shared/data/ipa-ur10"),
-        &mapping,
-        &chain,
-    )
-    .unwrap();
+    let real =
+        calibench::app::real_data::read_series(&root().join("data/ipa-ur10"), &mapping, &chain)
+            .unwrap();
     (chain, dh, real)
 }
 

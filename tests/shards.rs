@@ -147,3 +147,118 @@ fn bad_shard_arguments_are_refused_on_one_line() {
     let e = refusal(&merge(&[&dir.path().to_path_buf()], &dir.path().join("m")));
     assert!(e.contains("shard.json"), "{e}");
 }
+
+/// `scripts/slurm/submit.sh` with a stand-in `sbatch` that records its arguments: the caller's
+/// `--cpus-per-task`, `--time`, `--partition` and `--mem` reach every shard, the last two the merge job as well;
+/// without them sbatch gets none (the scripts' `#SBATCH` defaults hold); a wrong option is refused.
+#[cfg(unix)]
+#[test]
+fn submit_passes_the_callers_slurm_options_to_sbatch() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let sbatch = bin.join("sbatch");
+    // Job ids 101, 102, ... in call order; each call's arguments one per line in LOG.<id>.
+    std::fs::write(
+        &sbatch,
+        "#!/usr/bin/env bash\nn=$(( $(cat \"$SBATCH_LOG.count\" 2>/dev/null || echo 100) + 1 ))\n\
+         echo \"$n\" > \"$SBATCH_LOG.count\"\nprintf '%s\\n' \"$@\" > \"$SBATCH_LOG.$n\"\necho \"$n\"\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&sbatch, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let submit = |tag: &str, options: &[&str]| {
+        let log = dir.path().join(tag);
+        let path = format!(
+            "{}:{}",
+            bin.display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        let o = Command::new("bash")
+            .arg(root.join("scripts/slurm/submit.sh"))
+            .args(options)
+            .arg("scenarios/default.toml")
+            .arg("3")
+            .arg(dir.path().join(format!("results-{tag}")))
+            .arg(env!("CARGO_BIN_EXE_campaign"))
+            .env("PATH", path)
+            .env("SBATCH_LOG", &log)
+            .current_dir(root)
+            .output()
+            .expect("bash starts");
+        let calls: Vec<Vec<String>> = (101..=102)
+            .map(|id| {
+                std::fs::read_to_string(format!("{}.{id}", log.display()))
+                    .map(|t| t.lines().map(String::from).collect())
+                    .unwrap_or_default()
+            })
+            .collect();
+        (o, calls)
+    };
+    let options = [
+        "--cpus-per-task",
+        "8",
+        "--time",
+        "04:00:00",
+        "--partition",
+        "batch",
+        "--mem",
+        "16G",
+    ];
+    let (o, calls) = submit("given", &options);
+    let o = ok(o);
+    let (shard, merge) = (&calls[0], &calls[1]);
+    assert!(shard.iter().any(|a| a == "--array=0-2"), "{shard:?}");
+    for given in [
+        "--cpus-per-task=8",
+        "--time=04:00:00",
+        "--partition=batch",
+        "--mem=16G",
+    ] {
+        assert!(shard.contains(&given.to_string()), "{given}: {shard:?}");
+    }
+    assert!(
+        merge.iter().any(|a| a == "--dependency=afterok:101"),
+        "{merge:?}"
+    );
+    for (given, passed) in [
+        ("--partition=batch", true),
+        ("--mem=16G", true),
+        ("--cpus-per-task=8", false),
+        ("--time=04:00:00", false),
+    ] {
+        assert_eq!(
+            merge.contains(&given.to_string()),
+            passed,
+            "{given}: {merge:?}"
+        );
+    }
+    assert!(String::from_utf8_lossy(&o.stdout).contains("array job 101"));
+
+    let (o, calls) = submit("defaults", &[]);
+    ok(o);
+    for call in &calls {
+        assert!(!call.is_empty());
+        for option in ["--cpus-per-task", "--time", "--partition", "--mem"] {
+            assert!(
+                !call.iter().any(|a| a.starts_with(option)),
+                "{option}: {call:?}"
+            );
+        }
+    }
+
+    for (bad, needle) in [
+        (&["--nodes", "2"][..], "unknown option --nodes"),
+        (&["--time", ""][..], "--time needs a value"),
+    ] {
+        let (o, calls) = submit("bad", bad);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{bad:?}: {err}");
+        assert!(err.contains(needle), "{bad:?}: {err}");
+        assert!(
+            calls.iter().all(|c| c.is_empty()),
+            "{bad:?} submitted {calls:?}"
+        );
+    }
+}

@@ -12,6 +12,7 @@ mod campaign;
 mod curve;
 mod dataset;
 mod design;
+mod doc_commands;
 mod evaluation;
 mod honest;
 mod identify;

@@ -42,7 +42,7 @@ fn published_fk(q: &[f64]) -> Isometry3<f64> {
 }
 
 fn data_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/ipa-ur10")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/ipa-ur10")
 }
 
 /// A published number with a decimal comma.

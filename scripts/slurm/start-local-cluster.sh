@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
+# RUN AS ROOT: INSTALLS PACKAGES (slurm-wlm, munge, with apt) AND OVERWRITES /etc/slurm/slurm.conf (and creates
+# /etc/munge/munge.key if missing). Only on a machine whose Slurm and munge set-up you do not need.
+#
 # Starts a one-node Slurm cluster on this (Debian) machine, to try the scripts of this directory without a
 # cluster: munge for authentication, slurmctld and slurmd on localhost, one partition `local` with every CPU.
-# Run as root. Installs slurm-wlm and munge with apt when they are missing. Stop it with
+# Stop it with
 #   scripts/slurm/start-local-cluster.sh stop
 set -euo pipefail
 if [[ "${1:-}" == stop ]]; then

@@ -23,9 +23,12 @@ pub struct ApplyOptions {
     pub data: PathBuf,
     /// A column mapping for reading `data`.
     pub mapping: Option<PathBuf>,
-    /// Output CSV.
+    /// Output directory: [`APPLIED`] inside it.
     pub out: PathBuf,
 }
+
+/// The file `calibrate apply` writes into its output directory.
+pub const APPLIED: &str = "applied.csv";
 
 /// What [`apply`] did.
 #[derive(Clone, Debug)]
@@ -37,6 +40,7 @@ pub struct ApplyOutcome {
     pub warnings: Vec<String>,
     /// Configurations without a corrected command: the inverse is undefined there.
     pub without_command: usize,
+    /// The file written.
     pub out: PathBuf,
 }
 
@@ -53,8 +57,9 @@ impl ApplyOutcome {
 }
 
 /// Writes the saved model's predicted pose and corrected joint command for every configuration of
-/// `options.data` to `options.out`.
+/// `options.data` to [`APPLIED`] in the directory `options.out` (all or nothing, as every command writes).
 pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
+    output::check_dir(&options.out, &[APPLIED])?;
     let model = SavedModel::read(&options.model)?;
     let joint_names = model.joint_names().to_vec();
     let (ids, configurations) = match &options.mapping {
@@ -70,7 +75,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         &ids,
         &configurations,
     )?;
-    let out = &options.out;
+    let out = &options.out.join(APPLIED);
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
     let mut header: Vec<String> = vec!["point_id".into()];
@@ -125,7 +130,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     let bytes = w
         .into_inner()
         .map_err(|e| Error::Invalid(format!("{}: {e}", out.display())))?;
-    output::write_file(out, &bytes)?;
+    output::write_files(&options.out, &[(APPLIED, bytes)])?;
     Ok(ApplyOutcome {
         configurations: ids.len(),
         without_command: singular,

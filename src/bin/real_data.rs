@@ -1,5 +1,5 @@
 //! `real_data [--data-dir DIR] [--out DIR]`: every calibration method on the real UR10 laser-tracker campaigns
-//! of Landgraf et al. (IEEE CASE 2021; `../shared/data/ipa-ur10`), read through `mappings/ipa_ur10.toml`.
+//! of Landgraf et al. (IEEE CASE 2021; `data/ipa-ur10`), read through `mappings/ipa_ur10.toml`.
 //! Prints the README's tables as Markdown and writes them to `DIR/real_data.json`:
 //!
 //! 1. **Across campaigns**: fitted on all of series C (training 2/3, validation 1/3, split seed 0) and tested
@@ -19,67 +19,12 @@
 //! …/Series_D/… --method M` reproduces any row of table 1 (`--ignore-inputs` for the rows without
 //! temperature).
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::Parser;
-
-use calibench::app::real_data::{self, RealDataOptions};
-use calibench::app::sim_vs_real;
-
-#[derive(Parser, Debug)]
-#[command(
-    about = "Every calibration method on the real UR10 tracker data: the README's tables",
-    allow_negative_numbers = true
-)]
-struct Cli {
-    /// The data set's directory (Series_B, Series_C, Series_D), relative to the current directory.
-    #[arg(long, default_value = "../shared/data/ipa-ur10")]
-    data_dir: PathBuf,
-    /// Column mapping of the series (built in: works from any directory).
-    #[arg(long, default_value = "mappings/ipa_ur10.toml")]
-    mapping: PathBuf,
-    /// The robot, URDF or DH description (.toml); the default is built in.
-    #[arg(long, default_value = "robots/ur10.urdf")]
-    robot: PathBuf,
-    /// Output directory, relative to the current directory: real_data.json (and sim_vs_real.json, .csv with
-    /// --simulate).
-    #[arg(long, default_value = "results/real_data")]
-    out: PathBuf,
-    /// Draws per learning-curve size.
-    #[arg(long, default_value_t = 5)]
-    draws: usize,
-    /// Learning-curve sizes.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "25,50,100,200,400,800,1600"
-    )]
-    sizes: Vec<usize>,
-    /// Skip the learning curve.
-    #[arg(long)]
-    no_curve: bool,
-    /// Replay the series in this scenario's world and print the simulated tables beside the real ones.
-    #[arg(long, value_name = "SCENARIO")]
-    simulate: Option<PathBuf>,
-}
+use calibench::cli::real_data::{Cli, run};
 
 fn main() -> ExitCode {
-    let cli = calibench::app::parse_args::<Cli>();
-    let options = RealDataOptions {
-        data_dir: cli.data_dir,
-        mapping: cli.mapping,
-        robot: cli.robot,
-        out: cli.out,
-        draws: cli.draws,
-        sizes: Some(cli.sizes).filter(|_| !cli.no_curve),
-    };
-    let show = &mut |text: &str| print!("{text}");
-    let done = match &cli.simulate {
-        None => real_data::run(&options, show),
-        Some(scenario) => sim_vs_real::run(&options, scenario, show),
-    };
-    match done {
+    match run(calibench::app::parse_args::<Cli>()) {
         Ok(written) => {
             println!("\nwrote {}", written.display());
             ExitCode::SUCCESS

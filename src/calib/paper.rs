@@ -46,16 +46,34 @@ pub const NOMINAL: MethodInfo = MethodInfo {
     parameters: RobotParameters::None,
 };
 
-pub const PAPER_ROTZ: MethodInfo = paper_method("paper-rotz", ErrorModelKind::RotZ);
-pub const PAPER_ROTXYZ: MethodInfo = paper_method("paper-rotxyz", ErrorModelKind::RotXyz);
-pub const PAPER_ROTXYZ_TRANSXYZ: MethodInfo =
-    paper_method("paper-rotxyz-transxyz", ErrorModelKind::RotXyzTransXyz);
+pub const PAPER_ROTZ: MethodInfo = paper_method(
+    "paper-rotz",
+    ErrorModelKind::RotZ,
+    "the paper's method, error model RotZ (eq. 7): one rotation about z per DH frame, each a ridge regression \
+     on the configuration (and extra inputs)",
+);
+pub const PAPER_ROTXYZ: MethodInfo = paper_method(
+    "paper-rotxyz",
+    ErrorModelKind::RotXyz,
+    "the paper's method, error model RotXYZ (eq. 8): rotations about x, y and z per DH frame, each a ridge \
+     regression on the configuration (and extra inputs)",
+);
+pub const PAPER_ROTXYZ_TRANSXYZ: MethodInfo = paper_method(
+    "paper-rotxyz-transxyz",
+    ErrorModelKind::RotXyzTransXyz,
+    "the paper's method, error model RotXYZ+TransXYZ (eq. 5): rotations and translations along x, y and z per \
+     DH frame, each a ridge regression on the configuration (and extra inputs)",
+);
 
-/// The paper's method with one of its error models.
-const fn paper_method(name: &'static str, kind: ErrorModelKind) -> MethodInfo {
+/// The paper's method with one of its error models; `summary` says which (a user chooses by it).
+const fn paper_method(
+    name: &'static str,
+    kind: ErrorModelKind,
+    summary: &'static str,
+) -> MethodInfo {
     MethodInfo {
         name,
-        summary: "the paper's error parameters, each a ridge regression on the configuration (and extra inputs)",
+        summary,
         takes_inputs: true,
         base: None,
         parameters: RobotParameters::ErrorModel(kind),

@@ -47,8 +47,18 @@ pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
     parameters: RobotParameters::None,
 };
 
-pub const HYBRID: MethodInfo = hybrid("hybrid", &ELASTIC);
-pub const HYBRID_KINEMATIC: MethodInfo = hybrid("hybrid-kinematic", &KINEMATIC);
+pub const HYBRID: MethodInfo = hybrid(
+    "hybrid",
+    &ELASTIC,
+    "base elastic (constant geometry and joint compliances) plus ridge models of its residual on the joint \
+     angles (and extra inputs)",
+);
+pub const HYBRID_KINEMATIC: MethodInfo = hybrid(
+    "hybrid-kinematic",
+    &KINEMATIC,
+    "base kinematic (constant geometry only, no compliance) plus ridge models of its residual on the joint \
+     angles (and extra inputs)",
+);
 
 /// A hybrid on a base that has no hybrid of its own above (tests build them on every method). It is named
 /// `hybrid-<base>` ([`HybridModel::method`]); what else it is depends on the base, which this cannot say.
@@ -60,11 +70,16 @@ pub const HYBRID_ON_OTHER_BASE: MethodInfo = MethodInfo {
     parameters: RobotParameters::None,
 };
 
-/// The hybrid on `base`: its residual is data-driven, its parameters and design model are the base's.
-const fn hybrid(name: &'static str, base: &'static MethodInfo) -> MethodInfo {
+/// The hybrid on `base`: its residual is data-driven, its parameters and design model are the base's;
+/// `summary` names the base (a user chooses by it).
+const fn hybrid(
+    name: &'static str,
+    base: &'static MethodInfo,
+    summary: &'static str,
+) -> MethodInfo {
     MethodInfo {
         name,
-        summary: "a base method's prediction plus ridge models of its residual",
+        summary,
         takes_inputs: true,
         base: Some(base),
         parameters: base.parameters,
