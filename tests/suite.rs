@@ -12,6 +12,7 @@ mod campaign;
 mod dataset;
 mod design;
 mod evaluation;
+mod export;
 mod honest;
 mod identify;
 mod kinematic;

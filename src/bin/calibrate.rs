@@ -7,7 +7,8 @@
 //! on another campaign, re-registering its tracker frame and probe mounting on its own points.
 //!
 //! `calibrate apply --model model.json --data FILE.csv [--out FILE]`: predicted poses and corrected joint
-//! commands for new joint configurations.
+//! commands for new joint configurations; `calibrate export --model model.json --format urdf|dh [--robot URDF]
+//! [--out DIR]`: a kinematic or elastic model as a robot description (docs/export.md).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -16,6 +17,7 @@ use clap::{Args, Parser, Subcommand};
 
 use calibench::app::apply::{self, ApplyOptions};
 use calibench::app::calibrate::{self, FitOptions};
+use calibench::app::export::{self, ExportOptions};
 use calibench::calib::registry::MethodKind;
 use calibench::calib::regression::RegressionOptions;
 use calibench::eval::split::SplitRule;
@@ -40,6 +42,8 @@ struct Cli {
 enum Command {
     /// Predict poses and corrected joint commands for new configurations with a saved model.
     Apply(ApplyArgs),
+    /// Write a kinematic or elastic model as a robot description: a corrected URDF or a DH table.
+    Export(ExportOptions),
 }
 
 #[derive(Args, Debug)]
@@ -80,7 +84,7 @@ struct FitArgs {
     /// The calibration method.
     #[arg(long, default_value = "paper-rotxyz", value_parser = calibrate::method_values())]
     method: MethodKind,
-    /// Mass on the flange (kg), for the gravity torques of the elastic methods.
+    /// Mass on the flange (kg), for the elastic methods' gravity torques.
     #[arg(long, default_value_t = 0.0)]
     payload_kg: f64,
     /// Its centre of mass in the flange frame (m), x,y,z.
@@ -119,8 +123,7 @@ struct ApplyArgs {
     /// inputs such as the temperature take their training means).
     #[arg(long)]
     mapping: Option<PathBuf>,
-    /// Output CSV (relative to the current directory): predicted poses, corrected commands and each row's
-    /// domain status.
+    /// Output CSV (relative to the current directory): predicted poses, corrected commands, domain status.
     #[arg(long, default_value = "results/calibrate/applied.csv")]
     out: PathBuf,
 }
@@ -146,6 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             })?;
             (done.text(), done.warnings)
         }
+        Some(Command::Export(e)) => (export::export(&e)?.text(), Vec::new()),
         None => {
             let done = calibrate::fit(&fit_options(cli.fit)?)?;
             (done.text(), done.report.warnings)
