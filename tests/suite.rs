@@ -14,6 +14,7 @@ mod dataset;
 mod design;
 mod doc_commands;
 mod evaluation;
+mod export;
 mod honest;
 mod identify;
 mod iso9283;

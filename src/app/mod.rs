@@ -2,8 +2,9 @@
 //! what it returns. [`campaign`] runs a scenario: build its world once, hand each stage the world and its own
 //! section, and gather what they return (the only module that reads a [`Scenario`] besides `scenario`
 //! itself); [`calibrate`] fits a method on measured data (its `report.json` is [`calibration_report`]) and
-//! [`apply`] applies a saved model to new configurations; [`curve`] draws the learning curve of a measured
-//! file (`calibrate curve`); [`real_data`] runs the real-data protocol of
+//! [`apply`] applies a saved model to new configurations, [`export`] writes one as a robot description;
+//! [`curve`] draws the learning curve of a measured file (`calibrate curve`); [`real_data`] runs the
+//! real-data protocol of
 //! `eval::protocol` on the UR10 series.
 
 pub mod apply;
@@ -11,6 +12,7 @@ pub mod calibrate;
 pub mod calibration_report;
 pub mod campaign;
 pub mod curve;
+pub mod export;
 pub mod real_data;
 pub mod replay;
 pub mod shard;

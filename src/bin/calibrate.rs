@@ -7,8 +7,8 @@
 //! on another campaign, re-registering its tracker frame and probe mounting on its own points.
 //!
 //! `calibrate apply --model model.json --data FILE.csv [--out DIR]`: predicted poses and corrected joint
-//! commands for new joint configurations, in `DIR/applied.csv`. `calibrate curve` (flags: `--help`): the
-//! learning curve of a file.
+//! commands for new joint configurations, in `DIR/applied.csv`. `calibrate curve` and `calibrate export`
+//! (flags: `--help`): the learning curve of a file; a kinematic or elastic model as a robot description.
 
 use std::process::ExitCode;
 

@@ -18,6 +18,7 @@ use clap::{Args, Parser, Subcommand};
 use crate::app::apply::{self, ApplyOptions};
 use crate::app::calibrate::{self, FitOptions};
 use crate::app::curve::{self, CurveOptions};
+use crate::app::export::{self, ExportOptions};
 use crate::calib::registry::{MethodKind, RECOMMENDED};
 use crate::calib::regression::RegressionOptions;
 use crate::error::{Error, Result};
@@ -44,6 +45,8 @@ enum Command {
     Apply(ApplyArgs),
     /// The learning curve of a measured file: held-out errors of random training subsets of growing size.
     Curve(CurveOptions),
+    /// A kinematic or elastic model as a robot description (URDF or DH table) that other tools load.
+    Export(ExportOptions),
 }
 
 #[derive(Args, Debug)]
@@ -136,6 +139,7 @@ struct ApplyArgs {
 pub fn run(cli: Cli) -> Result<()> {
     let (text, warnings) = match cli.command {
         Some(Command::Curve(c)) => curve::run(&c)?.text_and_warnings(),
+        Some(Command::Export(e)) => (export::export(&e)?.text(), Vec::new()),
         Some(Command::Apply(a)) => {
             let done = apply::apply(&ApplyOptions {
                 model: a.model,

@@ -23,7 +23,9 @@ use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, V
 use serde::{Deserialize, Serialize};
 
 use super::chain::{Body, Chain, Inertial, Joint, JointKind};
-use super::plausible::{MAX_MASS_KG, bounded, length, non_negative};
+use super::dh::DhChain;
+use super::kinematics::{Frames, forward_kinematics};
+use super::plausible::{self, MAX_MASS_KG, bounded, length, non_negative};
 use crate::error::{Error, Result};
 
 /// The robots built into the binaries, by file name: the default robot and the examples of `robots/`, so that
@@ -55,19 +57,8 @@ fn built_in(path: &Path) -> Option<&'static str> {
 pub fn load(path: impl AsRef<Path>, flange_link: Option<&str>) -> Result<Chain> {
     let path = path.as_ref();
     let origin = path.display().to_string();
-    let text = match std::fs::read_to_string(path) {
-        Ok(text) => text,
-        Err(e) => match built_in(path) {
-            Some(text) if !path.exists() => text.to_string(),
-            _ => {
-                return Err(Error::Urdf {
-                    origin,
-                    message: format!("cannot read: {e}"),
-                });
-            }
-        },
-    };
-    if path.extension().is_some_and(|e| e == "toml") {
+    let text = read_text(path)?;
+    if is_dh_table(path) {
         let chain = from_toml(&text, &origin)?;
         if let Some(name) = flange_link.filter(|n| *n != chain.flange_link) {
             return Err(Error::Urdf {
@@ -84,7 +75,131 @@ pub fn load(path: impl AsRef<Path>, flange_link: Option<&str>) -> Result<Chain> 
     }
 }
 
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+/// The text of a robot file, or of the built-in robot its path names (see [`load`]).
+pub fn read_text(path: &Path) -> Result<String> {
+    match std::fs::read_to_string(path) {
+        Ok(text) => Ok(text),
+        Err(e) => match built_in(path) {
+            Some(text) if !path.exists() => Ok(text.to_string()),
+            _ => Err(Error::Urdf {
+                origin: path.display().to_string(),
+                message: format!("cannot read: {e}"),
+            }),
+        },
+    }
+}
+
+/// Whether [`load`] reads `path` as a DH description (its name ends in `.toml`) rather than a URDF.
+pub fn is_dh_table(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e == "toml")
+}
+
+/// The joint compliances (rad/Nm; joint name and value, base to tip) a robot file carries beside its
+/// kinematics — `calibrate export`'s `compliance` fields of a DH table, `<calibench:compliance>` elements of a
+/// URDF — or `None` when it carries none. No loader of the kinematics reads them: the chain is the unloaded
+/// arm's.
+pub fn compliances(path: &Path) -> Result<Option<Vec<(String, f64)>>> {
+    let text = read_text(path)?;
+    let origin = path.display().to_string();
+    if !is_dh_table(path) {
+        return super::export::urdf_compliances(&text, &origin);
+    }
+    let found: Vec<(String, f64)> = parse(&text, &origin)?
+        .joints
+        .into_iter()
+        .filter_map(|r| Some((r.name, r.compliance?)))
+        .collect();
+    Ok((!found.is_empty()).then_some(found))
+}
+
+/// A chain as a standard DH table in TOML (what [`from_toml`] reads back as the same kinematics): its DH form
+/// ([`DhChain::from_chain`]), each body's inertial in its DH frame, the limits (a continuous joint's as one turn
+/// either way), a `compliance` per joint when given; `header` opens the file as comment lines.
+pub fn to_toml(chain: &Chain, compliance: Option<&[f64]>, header: &str) -> Result<String> {
+    let n = chain.dof();
+    if let Some(j) = chain.joints.iter().find(|j| j.kind != JointKind::Revolute) {
+        return Err(Error::Invalid(format!(
+            "joint '{}' is prismatic: a DH table here holds revolute joints only; export as URDF",
+            j.name
+        )));
+    }
+    let dh = DhChain::from_chain(chain).map_err(|e| {
+        Error::Invalid(format!(
+            "no exact DH table: {}. Calibration makes nominally parallel joint axes (UR's 2, 3, 4) slightly \
+             skew, whose common normal standard DH needs lies metres to kilometres away; export with --format urdf",
+            e.detail()
+        ))
+    })?;
+    let far = dh
+        .rows
+        .iter()
+        .position(|r| r.d.abs().max(r.a.abs()) > plausible::MAX_LENGTH_M);
+    if let Some(i) = far {
+        return Err(Error::Invalid(format!(
+            "no usable DH table: row {} needs a length of {:.0} m (nearly parallel joint axes made skew by the \
+             calibration); export with --format urdf",
+            i + 1,
+            dh.rows[i].d.abs().max(dh.rows[i].a.abs())
+        )));
+    }
+    let dh_frames = dh.frames(&vec![0.0; n]);
+    let mut fk = Frames::new(chain);
+    forward_kinematics(chain, &vec![0.0; n], &mut fk);
+    let turn = 2.0 * std::f64::consts::PI;
+    let joints = chain
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| {
+            let r = &dh.rows[i];
+            let body = chain.bodies[i + 1]
+                .inertial
+                .transformed(&(dh_frames[i + 1].inverse() * fk.body[i + 1]));
+            let m = &body.inertia;
+            let massive = body.mass > 0.0;
+            JointRow {
+                name: j.name.clone(),
+                a: r.a,
+                alpha: r.alpha,
+                d: r.d,
+                theta_offset: r.theta_offset,
+                lower: if j.lower.is_finite() { j.lower } else { -turn },
+                upper: if j.upper.is_finite() { j.upper } else { turn },
+                velocity: j.velocity.is_finite().then_some(j.velocity),
+                effort: (j.effort > 0.0).then_some(j.effort),
+                mass: massive.then_some(body.mass),
+                com: massive.then_some([body.com.x, body.com.y, body.com.z]),
+                inertia: massive.then_some([
+                    m[(0, 0)],
+                    m[(1, 1)],
+                    m[(2, 2)],
+                    m[(0, 1)],
+                    m[(0, 2)],
+                    m[(1, 2)],
+                ]),
+                compliance: compliance.and_then(|c| c.get(i).copied()),
+            }
+        })
+        .collect();
+    let frame = |iso: &Isometry3<f64>| {
+        let (xyz, rpy) = super::export::xyz_rpy(iso);
+        Frame { xyz, rpy }
+    };
+    let description = Description {
+        name: chain.name.clone(),
+        convention: DhConvention::Dh,
+        angle_unit: AngleUnit::Rad,
+        base: frame(&dh.base),
+        tool: frame(&dh.tool),
+        joints,
+    };
+    let text = toml::to_string(&description)
+        .map_err(|e| Error::Invalid(format!("cannot write the DH table: {e}")))?;
+    let comment: String = header.lines().map(|l| format!("# {l}\n")).collect();
+    Ok(format!("{comment}{text}"))
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 enum DhConvention {
     Dh,
@@ -111,7 +226,7 @@ impl AngleUnit {
 }
 
 /// A fixed frame: translation (m) and fixed-axis roll, pitch, yaw (the table's angle unit), as a URDF origin.
-#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct Frame {
     #[serde(default)]
@@ -120,7 +235,7 @@ struct Frame {
     rpy: [f64; 3],
 }
 
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct JointRow {
     name: String,
@@ -149,9 +264,13 @@ struct JointRow {
     com: Option<[f64; 3]>,
     #[serde(default)]
     inertia: Option<[f64; 6]>,
+    /// rad/Nm: the joint's compliance from an elastic calibration (`calibrate export`). Not kinematics: the
+    /// chain is the unloaded arm's; [`compliances`] reads it.
+    #[serde(default)]
+    compliance: Option<f64>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct Description {
     name: String,
@@ -169,11 +288,19 @@ struct Description {
 
 /// The chain a DH description in TOML text gives; `origin` names the text in messages.
 pub fn from_toml(text: &str, origin: &str) -> Result<Chain> {
+    parse(text, origin)?.chain().map_err(|e| Error::Urdf {
+        origin: origin.to_string(),
+        message: e.detail(),
+    })
+}
+
+/// The description in TOML text, its values not yet checked.
+fn parse(text: &str, origin: &str) -> Result<Description> {
     let err = |message: String| Error::Urdf {
         origin: origin.to_string(),
         message,
     };
-    let d: Description = toml::from_str(text).map_err(|e| {
+    toml::from_str(text).map_err(|e| {
         let at = e
             .span()
             .map(|s| {
@@ -184,8 +311,7 @@ pub fn from_toml(text: &str, origin: &str) -> Result<Chain> {
             })
             .unwrap_or_default();
         err(format!("{at}{}", e.message().trim().replace('\n', " ")))
-    })?;
-    d.chain().map_err(|e| err(e.detail()))
+    })
 }
 
 impl Frame {
@@ -264,6 +390,9 @@ impl Description {
                 if let Some(v) = v {
                     non_negative(&f(k), v, 1e6, k)?;
                 }
+            }
+            if let Some(c) = r.compliance {
+                non_negative(&f("compliance"), c, 1.0, "compliance in rad/Nm")?;
             }
             match (r.mass, r.com, r.inertia) {
                 (None, None, None) => {}

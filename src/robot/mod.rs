@@ -7,6 +7,7 @@ pub mod collision;
 pub mod description;
 pub mod dh;
 pub mod dynamics;
+pub mod export;
 pub mod ik;
 pub mod inverse_dynamics;
 pub mod kinematics;

@@ -356,7 +356,7 @@ fn movable_joint(
     })
 }
 
-fn first_line(s: &str) -> &str {
+pub(super) fn first_line(s: &str) -> &str {
     s.lines().next().unwrap_or(s)
 }
 
@@ -368,7 +368,7 @@ fn finite3(v: &[f64; 3], what: &str) -> std::result::Result<(), String> {
     }
 }
 
-fn pose_of(p: &urdf_rs::Pose) -> std::result::Result<Isometry3<f64>, String> {
+pub(super) fn pose_of(p: &urdf_rs::Pose) -> std::result::Result<Isometry3<f64>, String> {
     finite3(&p.xyz.0, "origin xyz")?;
     finite3(&p.rpy.0, "origin rpy")?;
     let [x, y, z] = p.xyz.0;
@@ -497,7 +497,7 @@ fn urdf_pose(iso: &Isometry3<f64>) -> urdf_rs::Pose {
 }
 
 /// A URDF link of a body: its merged inertial, no geometry.
-fn urdf_link(name: String, inertial: &Inertial) -> urdf_rs::Link {
+pub(super) fn urdf_link(name: String, inertial: &Inertial) -> urdf_rs::Link {
     let i = &inertial.inertia;
     urdf_rs::Link {
         name,

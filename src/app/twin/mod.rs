@@ -3,11 +3,10 @@
 //!
 //! Steps, each returning what the next takes: read and check the pilot ([`pilot`]); identify the arm — its
 //! geometry and joint compliances by the elastic fit, carried over to the truth's joint frames
-//! ([`geometry`]); measure the pilot's own statistics; fit the magnitudes of what no method models to them
+//! (`calib::kinematic::geometry`); measure the pilot's own statistics; fit the magnitudes of what no method models to them
 //! ([`magnitudes`]); write `twin.toml` ([`scenario`]), `twin.json` and `twin.md` ([`report`]).
 
 pub mod answer;
-pub mod geometry;
 pub mod magnitudes;
 pub mod pilot;
 pub mod report;
@@ -21,7 +20,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use self::magnitudes::{DEFAULTS, Magnitude, SEEDS, Targets};
 use self::pilot::{HeldOut, Repeats};
 use self::scenario::{TwinValues, Workspace};
-use crate::calib::kinematic::KinematicModel;
+use crate::calib::kinematic::{KinematicModel, geometry};
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::registry::{MethodKind, PHYSICAL};
 use crate::dataset::{Dataset, random_train_val};

@@ -50,10 +50,12 @@
 //! **Files.** `params` (the candidates in priority order and the state they overwrite), `gravity` (gravity
 //! torques on the DH chain for the compliances), `problem` (residuals and their analytic Jacobian), `solve`
 //! (Levenberg–Marquardt in whitened coordinates), `identify` (the structural set, the rank check, the
-//! identification Jacobian for design), `fit` (the steps of the fit), and here the model: its fit, prediction
+//! identification Jacobian for design), `fit` (the steps of the fit), `geometry` (the fitted DH-frame errors as
+//! offsets of a robot description's joint frames: the twin's truth, an exported URDF), and here the model: its fit, prediction
 //! and report.
 
 mod fit;
+pub mod geometry;
 mod gravity;
 mod identify;
 mod params;

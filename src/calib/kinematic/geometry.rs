@@ -1,16 +1,17 @@
-//! The identified arm's geometry in the truth's terms. The elastic fit says the geometry as errors of the DH
-//! frames (`calib::kinematic`); the true robot perturbs the URDF chain's joint frames ([`KnownGeometry`]). The
+//! The identified arm's geometry in a robot description's terms. The fit says the geometry as errors of the DH
+//! frames; a robot description (and the true robot, which perturbs it: [`KnownGeometry`]) has joint frames. The
 //! offsets that make the true chain's rigid kinematics equal the model's are fitted here, by Gauss–Newton with
 //! minimum-norm steps (the parametrization is redundant: a zero offset and a rotation of the joint frame about
 //! its axis do the same), at configurations spread over the pilot's joint ranges. The last DH frame's error
 //! acts after the last joint turns, where the URDF chain has only its fixed flange: it comes out as an offset
-//! of the flange, which the twin carries in the probe's position on it (a probe is registered anyway).
+//! of the flange (the twin carries it in the probe's position on it, an exported URDF in its tool frame).
+//! Shared by `campaign twin` (the truth of the twin) and `calibrate export` (a corrected robot description).
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 use rand::Rng;
 
+use super::KinematicModel;
 use crate::calib::error_model::flange_pose_with_errors;
-use crate::calib::kinematic::KinematicModel;
 use crate::error::{Error, Result};
 use crate::numeric;
 use crate::rng::{Stream, derive};
@@ -63,7 +64,7 @@ pub fn known_geometry(
             .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
             .fold(0.0, f64::max);
         if std::env::var_os("CALIBENCH_DEBUG_TWIN").is_some() {
-            eprintln!("twin geometry: worst {worst:.3e} m");
+            eprintln!("model geometry: worst {worst:.3e} m");
         }
         if worst < MATCH_TOLERANCE_M * 1e-2 {
             break;
@@ -78,12 +79,12 @@ pub fn known_geometry(
                 / (2.0 * STEP);
             j.set_column(k, &d);
         }
-        let svd = numeric::svd(j, true, true, "twin geometry")?;
+        let svd = numeric::svd(j, true, true, "model geometry")?;
         // Directions the flange does not feel (the redundancy) get no step: a minimum-norm solve.
         let largest = svd.singular_values.max();
         let step = svd
             .solve(&(-&r), 1e-6 * largest)
-            .map_err(|e| Error::Invalid(format!("twin geometry: {e}")))?;
+            .map_err(|e| Error::Invalid(format!("model geometry: {e}")))?;
         p += step;
     }
     if worst.is_nan() || worst >= MATCH_TOLERANCE_M {
