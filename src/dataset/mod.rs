@@ -303,6 +303,17 @@ impl Dataset {
     }
 }
 
+/// Configurations measured more than once: the indices of each group of `q` whose joint angles agree to
+/// 1 mrad (rounded to it), groups of two or more only, in the order of their angles.
+pub fn repeat_groups(q: &[&[f64]]) -> Vec<Vec<usize>> {
+    let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
+    for (i, q) in q.iter().enumerate() {
+        let key = q.iter().map(|v| (v * 1e3).round() as i64).collect();
+        groups.entry(key).or_default().push(i);
+    }
+    groups.into_values().filter(|m| m.len() > 1).collect()
+}
+
 /// Joint configurations only (for applying a model to commands): the `point_id` column (or row
 /// numbers, as in [`Dataset`]) and the angles (rad) in `joint_names` order. Other columns are ignored.
 pub fn read_joints(path: &Path, joint_names: &[String]) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
