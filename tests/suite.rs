@@ -32,6 +32,7 @@ mod tracker;
 mod trajectory;
 mod truth;
 mod truth_effects;
+mod twin;
 mod ur10;
 
 /// Cargo no longer discovers test files (`autotests = false`), so a file not declared here would silently

@@ -14,6 +14,7 @@ pub mod replay;
 pub mod shard;
 pub mod sim_vs_real;
 pub mod test_points;
+pub mod twin;
 
 use crate::calib::method::FitContext;
 use crate::campaign::{Generator, Simulation};

@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use calibench::app::campaign::{self, CampaignOptions, ReplaySource};
-use calibench::app::{set_threads, shard};
+use calibench::app::{calibrate, set_threads, shard, twin};
 use calibench::scenario::Scenario;
 use calibench::study::Shard;
 use calibench::{Error, Result};
@@ -81,6 +81,42 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
+    /// Build the twin of one measured arm from a pilot campaign (100–300 points): its identified geometry and
+    /// joint compliances, the magnitudes of what no method models fitted to the pilot; writes twin.toml (a
+    /// scenario: `campaign DIR/twin.toml`, `--replay`), twin.json and twin.md.
+    Twin(TwinArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct TwinArgs {
+    /// The robot: a URDF or a DH description (.toml); built-in robots work from any directory.
+    #[arg(long)]
+    robot: PathBuf,
+    /// The link carrying the probe [default: the chain's last link].
+    #[arg(long)]
+    flange_link: Option<String>,
+    /// The pilot campaign (the `measurements.csv` format, or any export with `--mapping`).
+    #[arg(long)]
+    data: PathBuf,
+    #[arg(long)]
+    mapping: Option<PathBuf>,
+    /// Drop the pilot's extra inputs (its temperature).
+    #[arg(long)]
+    ignore_inputs: bool,
+    /// Mass on the flange (kg) and its centre of mass in the flange frame (m, x,y,z).
+    #[arg(long, default_value_t = 0.0)]
+    payload_kg: f64,
+    #[arg(long, value_delimiter = ',', default_value = "0,0,0")]
+    payload_com_m: Vec<f64>,
+    /// Seed of the pilot's splits and of the twin's draws.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Draws of the twin its study is run for, to give the answer with a range (0: none).
+    #[arg(long, default_value_t = 5)]
+    answer_draws: usize,
+    /// Output directory: twin.toml, twin.json, twin.md, replaced all at once.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 fn main() -> ExitCode {
@@ -104,6 +140,22 @@ fn run(args: &Args) -> Result<()> {
         set_threads(*t)?;
         let done = shard::merge(dirs, out.clone())?;
         println!("merged {} shard directories", dirs.len());
+        print!("{}", done.text());
+        return Ok(());
+    }
+    if let Some(Command::Twin(a)) = &args.command {
+        set_threads(args.threads)?;
+        let done = twin::run(&twin::TwinOptions {
+            robot: a.robot.clone(),
+            flange_link: a.flange_link.clone(),
+            data: a.data.clone(),
+            mapping: a.mapping.clone(),
+            ignore_inputs: a.ignore_inputs,
+            payload: calibrate::payload(a.payload_kg, &a.payload_com_m)?,
+            seed: a.seed,
+            answer_draws: a.answer_draws,
+            out: a.out.clone(),
+        })?;
         print!("{}", done.text());
         return Ok(());
     }

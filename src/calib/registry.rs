@@ -65,6 +65,10 @@ pub const REFERENCE: MethodKind = MethodKind::Nominal;
 /// (the real-data tables give each best result as a margin below it).
 pub const CLASSICAL: MethodKind = MethodKind::Kinematic;
 
+/// The physical model of an arm, its geometry and joint compliances: what a twin of a measured arm is
+/// identified with, and whose error on points it was not fitted on a twin reproduces.
+pub const PHYSICAL: MethodKind = MethodKind::Elastic;
+
 impl MethodKind {
     /// What the method is, as its own file states it.
     pub fn info(self) -> &'static MethodInfo {

@@ -10,6 +10,6 @@ pub mod thermal;
 
 pub use history::Visit;
 pub use motion::{MotionSample, PathPoint};
-pub use perturbation::{DeflectionSolver, ErrorModel, Perturbation};
+pub use perturbation::{DeflectionSolver, ErrorModel, KnownGeometry, Offset, Perturbation};
 pub use robot::{TrueRobot, TrueState};
 pub use thermal::ThermalProfile;

@@ -99,6 +99,70 @@ pub struct ErrorModel {
         skip_serializing_if = "is_default_damping_ratio"
     )]
     pub damping_ratio: f64,
+    /// `[truth.geometry]`: the geometry of one particular arm (what `campaign twin` identified from a pilot
+    /// campaign), to which the σ draws of `base_*`, `frame_*` and `joint_zero_rad` add; absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<KnownGeometry>,
+}
+
+/// Explicit geometric errors of the true robot, in the terms of [`Perturbation`]: the base's offset, an offset
+/// appended to each joint's origin (in the joint frame), each joint's zero offset (rad).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KnownGeometry {
+    pub base: Offset,
+    pub joint_frames: Vec<Offset>,
+    pub joint_zero_rad: Vec<f64>,
+}
+
+/// The largest known offset a scenario may give (m, rad): a joint frame a few centimetres or degrees off is
+/// not an arm's geometric error but a wrong robot description.
+const MAX_KNOWN_TRANSLATION_M: f64 = 0.05;
+const MAX_KNOWN_ROTATION_RAD: f64 = 0.1;
+
+impl KnownGeometry {
+    /// One offset per joint, every value finite and of an arm's size.
+    fn validate(&self, dof: usize) -> Result<()> {
+        let bad = |m: String| Err(Error::Invalid(m));
+        for (name, len) in [
+            ("joint_frames", self.joint_frames.len()),
+            ("joint_zero_rad", self.joint_zero_rad.len()),
+        ] {
+            if len != dof {
+                return bad(format!(
+                    "truth.geometry.{name} has {len} values, the robot has {dof} joints"
+                ));
+            }
+        }
+        let offsets = std::iter::once(("base".to_string(), &self.base)).chain(
+            self.joint_frames
+                .iter()
+                .enumerate()
+                .map(|(i, o)| (format!("joint_frames[{i}]"), o)),
+        );
+        for (name, o) in offsets {
+            let t = o.translation.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let r = o.rotation.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            if !(t <= MAX_KNOWN_TRANSLATION_M && r <= MAX_KNOWN_ROTATION_RAD) {
+                return bad(format!(
+                    "truth.geometry.{name}: {:?} m, {:?} rad must be finite and within \
+                     {MAX_KNOWN_TRANSLATION_M} m and {MAX_KNOWN_ROTATION_RAD} rad",
+                    o.translation, o.rotation
+                ));
+            }
+        }
+        if let Some(z) = self
+            .joint_zero_rad
+            .iter()
+            .find(|z| !z.is_finite() || z.abs() > MAX_KNOWN_ROTATION_RAD)
+        {
+            return bad(format!(
+                "truth.geometry.joint_zero_rad has {z}; each must be finite and within \
+                 {MAX_KNOWN_ROTATION_RAD} rad"
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The joints' damping ratio when a scenario gives none; its source is in `scenarios/README.md`
@@ -216,6 +280,9 @@ impl ErrorModel {
         if let Some(t) = &self.thermal {
             t.validate()?;
         }
+        if let Some(g) = &self.geometry {
+            g.validate(dof)?;
+        }
         Ok(())
     }
 
@@ -282,6 +349,7 @@ fn each_positive(name: &str, stiffness: &[f64]) -> Result<()> {
 
 /// A small rigid offset: translation (m) and rotation vector (rad), `T(t) · exp(r)`.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub struct Offset {
     pub translation: [f64; 3],
     pub rotation: [f64; 3],
@@ -298,6 +366,16 @@ impl Offset {
             Translation3::from(Vector3::from(self.translation)),
             UnitQuaternion::from_scaled_axis(Vector3::from(self.rotation)),
         )
+    }
+
+    /// The offset of both: their translations and rotation vectors added (exact to first order, which is what
+    /// offsets of micrometres and microradians need).
+    fn plus(&self, other: &Offset) -> Offset {
+        let add = |a: [f64; 3], b: [f64; 3]| [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+        Offset {
+            translation: add(self.translation, other.translation),
+            rotation: add(self.rotation, other.rotation),
+        }
     }
 
     fn sample(rng: &mut ChaCha8Rng, sigma_t: f64, sigma_r: f64) -> Offset {
@@ -376,10 +454,10 @@ impl Perturbation {
     /// go anywhere; one that draws goes after every earlier draw, so a scenario without it draws the same robot.
     fn draw(model: &ErrorModel, dof: usize, rng: &mut ChaCha8Rng) -> Perturbation {
         let base = Offset::sample(rng, model.base_translation_m, model.base_rotation_rad);
-        let joint_frames = (0..dof)
+        let joint_frames: Vec<Offset> = (0..dof)
             .map(|_| Offset::sample(rng, model.frame_translation_m, model.frame_rotation_rad))
             .collect();
-        let joint_zero = (0..dof)
+        let joint_zero: Vec<f64> = (0..dof)
             .map(|_| normal(rng, model.joint_zero_rad))
             .collect();
         let stiffness: Vec<f64> = model
@@ -425,6 +503,25 @@ impl Perturbation {
                 k3,
             })
             .collect();
+        // A known geometry draws nothing: the draws above stay those of the same magnitudes without it.
+        let (base, joint_frames, joint_zero) = match &model.geometry {
+            None => (base, joint_frames, joint_zero),
+            Some(known) => (
+                known.base.plus(&base),
+                known
+                    .joint_frames
+                    .iter()
+                    .zip(&joint_frames)
+                    .map(|(k, d)| k.plus(d))
+                    .collect(),
+                known
+                    .joint_zero_rad
+                    .iter()
+                    .zip(&joint_zero)
+                    .map(|(k, d)| k + d)
+                    .collect(),
+            ),
+        };
         Perturbation {
             base,
             joint_frames,
@@ -476,6 +573,66 @@ fn normal(rng: &mut ChaCha8Rng, sigma: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A known geometry is added to the σ draws, which stay what the same magnitudes draw without it; it is
+    /// read from a `[truth.geometry]` table and refused when it does not fit the robot.
+    #[test]
+    fn a_known_geometry_adds_to_the_draws() {
+        let mut model: ErrorModel = toml::from_str(&format!(
+            "{REQUIRED_AT_ZERO}\n[geometry]\nbase = {{ translation = [0.001, 0.0, 0.0], rotation = [0.0, 0.0, 0.002] }}\n\
+             joint_frames = [{{ translation = [0.0, 1e-4, 0.0], rotation = [3e-4, 0.0, 0.0] }}, \
+             {{ translation = [0.0, 0.0, 2e-4], rotation = [0.0, 0.0, 0.0] }}]\njoint_zero_rad = [1e-3, -2e-3]\n"
+        ))
+        .unwrap();
+        model.stiffness_nm_per_rad = vec![1e5; 2];
+        model.validate(2).unwrap();
+        let known = model.geometry.clone().unwrap();
+        let exact = Perturbation::sample(&model, 2, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        assert_eq!(exact.base, known.base);
+        assert_eq!(exact.joint_frames, known.joint_frames);
+        assert_eq!(exact.joint_zero, known.joint_zero_rad);
+
+        model.frame_translation_m = 1e-4;
+        model.joint_zero_rad = 1e-3;
+        let with = Perturbation::sample(&model, 2, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let without = Perturbation::sample(
+            &ErrorModel {
+                geometry: None,
+                ..model.clone()
+            },
+            2,
+            &mut ChaCha8Rng::seed_from_u64(3),
+        )
+        .unwrap();
+        for j in 0..2 {
+            assert_eq!(
+                with.joint_frames[j],
+                known.joint_frames[j].plus(&without.joint_frames[j])
+            );
+            assert_eq!(
+                with.joint_zero[j],
+                known.joint_zero_rad[j] + without.joint_zero[j]
+            );
+        }
+        assert_eq!(with.stiffness, without.stiffness);
+        let three = ErrorModel {
+            stiffness_nm_per_rad: vec![1e5; 3],
+            ..model.clone()
+        };
+        let e = three.validate(3).unwrap_err().to_string();
+        assert!(
+            e.contains("truth.geometry.joint_frames has 2 values"),
+            "{e}"
+        );
+        model.geometry.as_mut().unwrap().joint_zero_rad[1] = f64::NAN;
+        assert!(
+            model
+                .validate(2)
+                .unwrap_err()
+                .to_string()
+                .contains("joint_zero_rad")
+        );
+    }
 
     #[test]
     fn stiff_only_takes_every_default_from_the_serde_attributes() {

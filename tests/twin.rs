@@ -1,0 +1,274 @@
+//! `campaign twin`: a twin built from a simulated pilot of a known arm recovers that arm — its geometry and
+//! joint compliances within their standard deviations, the magnitudes of what no method models within a factor
+//! 1.5 — and a pilot too small or too narrow is refused on one line, with nothing written.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use tempfile::TempDir;
+
+use calibench::app::replay;
+use calibench::app::twin::{self, TwinOptions, TwinOutcome};
+use calibench::calib::kinematic::KinematicModel;
+use calibench::calib::method::FitContext;
+use calibench::dataset::{Dataset, random_train_val};
+use calibench::eval::split::Parts;
+use calibench::robot::Payload;
+use calibench::robot::dh::DhChain;
+use calibench::scenario::Scenario;
+use calibench::{app, measurements};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The known arm: a UR10 with random geometry, known stiffness, the strain-wave wave and repeatability the
+/// twin must find, and the sources it does not fit at the twin's own cited values.
+const GEAR_WAVE_RAD: f64 = 2.5e-4;
+const REPEATABILITY_RAD: f64 = 4e-5;
+const STIFFNESS: [f64; 6] = [2e5, 1.5e5, 8e4, 3e4, 3e4, 3e4];
+
+fn known_text(unmodelled: bool) -> String {
+    let on = |v: &str| {
+        if unmodelled {
+            v.to_string()
+        } else {
+            "0.0".into()
+        }
+    };
+    format!(
+        r#"name = "known_ur10"
+seed = 7
+[robot]
+urdf = {urdf:?}
+payload_kg = 1.2
+payload_com_m = [0.0, 0.0, 0.07]
+[truth]
+frame_translation_m = 3e-4
+frame_rotation_rad = 5e-4
+joint_zero_rad = 8e-4
+base_translation_m = 0.0
+base_rotation_rad = 0.0
+stiffness_nm_per_rad = {stiffness:?}
+repeatability_rad = {rep}
+hysteresis_rad = {hys}
+link_mass_spread = {mass}
+link_com_m = {com}
+cable_kg_per_m = {cable}
+tilt_stiffness_nm_per_rad = [5e5, 5e5, 5e5, 5e5, 5e5, 5e5]
+gear_ratio = [101, 101, 101, 101, 101, 101]
+gear_wave_amplitude_rad = {wave}
+[tracker]
+position_m = [0.75, 3.52, 1.23]
+yaw_deg = -20.0
+tilt_deg = [0.0, 0.0]
+range_sigma_m = {rs}
+range_sigma_per_m = {rsm}
+angle_sigma_rad = {ang}
+acceptance_half_angle_deg = 60.0
+[reflectors]
+nominal_m = [[0.0, 0.0, 0.1]]
+facing = [0.0, 0.0, 1.0]
+mount_translation_m = 0.0
+[campaign]
+posture_deg = [90.0, -90.0, 90.0, -90.0, -90.0, 0.0]
+[[regions]]
+name = "wide"
+center_m = [0.0, 0.8, 0.4]
+size_m = [0.8, 0.5, 0.6]
+points = 200
+tool_rpy_deg = [-90.0, 0.0, 0.0]
+cone_half_angle_deg = 30.0
+spin_deg = 60.0
+"#,
+        urdf = root().join("robots/ur10.urdf"),
+        stiffness = STIFFNESS,
+        rep = on(&REPEATABILITY_RAD.to_string()),
+        hys = on("2e-5"),
+        mass = on("0.1"),
+        com = on("0.01"),
+        cable = on("0.3"),
+        wave = on(&GEAR_WAVE_RAD.to_string()),
+        rs = on("8e-6"),
+        rsm = on("3e-6"),
+        ang = on("5e-6"),
+    )
+}
+
+/// The pilot's configurations: a planned campaign of the known arm's region, then its first 40 again (a
+/// pilot that measures some poses twice).
+fn configurations() -> Dataset {
+    let scenario = Scenario::parse(&known_text(true), "known arm").unwrap();
+    let sim = app::simulate(&scenario).unwrap();
+    let planned = measurements::as_dataset(&sim.campaign, "planned").unwrap();
+    let rows: Vec<usize> = (0..planned.len()).chain(0..40).collect();
+    planned.subset(&rows)
+}
+
+/// `configs` measured by the known arm, with or without what no method models.
+fn measured(configs: &Dataset, unmodelled: bool) -> Dataset {
+    let mut scenario = Scenario::parse(&known_text(unmodelled), "known arm").unwrap();
+    let r = replay::replay(&mut scenario, configs, 0).unwrap();
+    replay::as_dataset(&r, configs).unwrap()
+}
+
+struct Built {
+    outcome: TwinOutcome,
+    pilot: Dataset,
+    _dir: TempDir,
+}
+
+fn built() -> &'static Built {
+    static B: OnceLock<Built> = OnceLock::new();
+    B.get_or_init(|| {
+        let dir = TempDir::new().unwrap();
+        let configs = configurations();
+        let pilot = measured(&configs, true);
+        let file = dir.path().join("pilot.csv");
+        let mut scenario = Scenario::parse(&known_text(true), "known arm").unwrap();
+        let r = replay::replay(&mut scenario, &configs, 0).unwrap();
+        std::fs::write(
+            &file,
+            measurements::measurements_csv(&r.sim.campaign).unwrap(),
+        )
+        .unwrap();
+        let outcome = twin::run(&options(&file, &dir.path().join("twin"))).unwrap();
+        Built {
+            outcome,
+            pilot,
+            _dir: dir,
+        }
+    })
+}
+
+fn options(data: &Path, out: &Path) -> TwinOptions {
+    TwinOptions {
+        robot: root().join("robots/ur10.urdf"),
+        flange_link: None,
+        data: data.to_path_buf(),
+        mapping: None,
+        ignore_inputs: false,
+        payload: Payload {
+            mass: 1.2,
+            com: [0.0, 0.0, 0.07],
+        },
+        seed: 1,
+        answer_draws: 2,
+        out: out.to_path_buf(),
+    }
+}
+
+#[test]
+fn the_twin_finds_the_magnitudes_of_what_no_method_models() {
+    let b = built();
+    let value = |key: &str| b.outcome.values.magnitude(key);
+    for (key, truth) in [
+        ("truth.gear_wave_amplitude_rad", GEAR_WAVE_RAD),
+        ("truth.repeatability_rad", REPEATABILITY_RAD),
+    ] {
+        let fitted = value(key);
+        eprintln!("{key}: fitted {fitted:.3e}, true {truth:.3e}");
+        assert!(
+            fitted / truth < 1.5 && truth / fitted < 1.5,
+            "{key}: fitted {fitted:.3e}, true {truth:.3e}"
+        );
+    }
+    // The files are written, and twin.toml is a scenario that loads.
+    let dir = &b.outcome.out;
+    for f in ["twin.toml", "twin.json", "twin.md"] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    let twin = Scenario::load(dir.join("twin.toml")).unwrap();
+    assert!(twin.world.truth.geometry.is_some() && twin.study.is_some());
+    assert_eq!(b.pilot.len(), 240);
+    // The answer over the twin's two draws: a recommendation for the loosest target in each.
+    let loosest = &b.outcome.answer[0];
+    assert_eq!(loosest.points.len(), 2);
+    assert!(loosest.method.is_some() && loosest.points.iter().all(Option::is_some));
+}
+
+#[test]
+fn the_twin_recovers_the_geometry_and_compliances_within_their_stds() {
+    let b = built();
+    // The known arm's parameters in the fit's own terms: the same fit on the same configurations measured
+    // without noise and without what no method models.
+    let chain = calibench::robot::load(root().join("robots/ur10.urdf"), None).unwrap();
+    let dh = DhChain::from_chain(&chain).unwrap();
+    let ctx = FitContext {
+        payload: Payload {
+            mass: 1.2,
+            com: [0.0, 0.0, 0.07],
+        },
+        ..FitContext::new(&chain, &dh)
+    };
+    let exact = measured(&configurations(), false);
+    let labels = random_train_val(exact.len(), 2.0 / 3.0, 1).unwrap();
+    let Parts { train, val, .. } = Parts::of(&exact, labels);
+    let truth = KinematicModel::fit(true, &ctx, &train, &val).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(b.outcome.out.join("twin.json")).unwrap()).unwrap();
+    let mut worst: f64 = 0.0;
+    let mut compared = 0;
+    for p in json["identified"]["parameters"].as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        let Some(k) = truth.kept.iter().position(|q| q.name() == name) else {
+            continue;
+        };
+        // The fit's own values: the twin draws the poorly determined ones toward typical sizes afterwards.
+        let (value, std) = (
+            p["fitted"].as_f64().unwrap(),
+            p["fitted_std"].as_f64().unwrap(),
+        );
+        let z = (value - truth.values[k]).abs() / std;
+        eprintln!(
+            "{name}: {value:.3e} against {:.3e}, {z:.2} σ",
+            truth.values[k]
+        );
+        worst = worst.max(z);
+        compared += 1;
+    }
+    assert!(compared > 20, "{compared} parameters compared");
+    assert!(worst < 3.0, "a parameter {worst:.2} σ from the known arm's");
+}
+
+#[test]
+fn a_small_or_narrow_pilot_is_refused_and_nothing_is_written() {
+    let dir = TempDir::new().unwrap();
+    let configs = configurations();
+    let mut scenario = Scenario::parse(&known_text(true), "known arm").unwrap();
+    let few = configs.subset(&(0..50).collect::<Vec<_>>());
+    let r = replay::replay(&mut scenario, &few, 0).unwrap();
+    let file = dir.path().join("few.csv");
+    std::fs::write(
+        &file,
+        measurements::measurements_csv(&r.sim.campaign).unwrap(),
+    )
+    .unwrap();
+    let out = dir.path().join("twin");
+    let Err(e) = twin::run(&options(&file, &out)) else {
+        panic!("a pilot of 50 points was accepted");
+    };
+    let e = e.to_string();
+    assert!(e.contains("50 points") && e.contains("30 more"), "{e}");
+    assert!(!out.exists());
+
+    // A pilot whose last joint never turns: the twin could not identify it.
+    let mut still = configs.clone();
+    still.q.iter_mut().for_each(|q| q[5] = 0.3);
+    let r = replay::replay(&mut scenario, &still, 0).unwrap();
+    let file = dir.path().join("still.csv");
+    std::fs::write(
+        &file,
+        measurements::measurements_csv(&r.sim.campaign).unwrap(),
+    )
+    .unwrap();
+    let Err(e) = twin::run(&options(&file, &out)) else {
+        panic!("a pilot whose wrist never turns was accepted");
+    };
+    let e = e.to_string();
+    assert!(
+        e.contains("wrist_3_joint (0.0°)") && e.contains("less than 20°"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
