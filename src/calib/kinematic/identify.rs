@@ -197,7 +197,7 @@ pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiabi
 /// (measured arms: 1e-6 to 3e-4 rad/Nm). The tracker frame (or, for data in the base frame, the base error
 /// frame, which holds the base's placement in whatever frame the data were put in) and the mounting have no
 /// such size: they are kept whatever the data, and must be determined (else the fit is refused).
-pub(super) fn plausible_size(p: Param) -> Option<f64> {
+pub fn plausible_size(p: Param) -> Option<f64> {
     match p {
         Param::TrackerRotation(_)
         | Param::TrackerTranslation(_)

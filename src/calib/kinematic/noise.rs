@@ -172,7 +172,7 @@ mod tests {
     /// two transverse axes and the range.
     #[test]
     fn the_specification_constant_is_half_the_mpe_at_three_metres() {
-        let d = 3.0;
+        let d: f64 = 3.0;
         let transverse = 0.5 * (15e-6 + 6e-6 * d);
         let range = 0.5 * (10e-6 + 0.3e-6 * d);
         let sigma = ((2.0 * transverse * transverse + range * range) / 3.0).sqrt();
@@ -202,7 +202,10 @@ mod tests {
         let empty = Dataset::in_memory("v", vec!["a".into(), "b".into()], vec![], vec![]);
         let n = floor(&data(10), &empty);
         assert_eq!(n.source, NoiseSource::RepeatedConfigurations);
-        assert!((n.sigma_m - (2.0 * d * d / 3.0).sqrt()).abs() < 1e-12, "{n:?}");
+        assert!(
+            (n.sigma_m - (2.0 * d * d / 3.0).sqrt()).abs() < 1e-12,
+            "{n:?}"
+        );
         let few = floor(&data(9), &empty);
         assert_eq!(few.source, NoiseSource::TrackerSpecification);
         assert_eq!(few.sigma_m, SPEC_NOISE_M);
