@@ -214,10 +214,6 @@ pub fn plausible_size(p: Param) -> Option<f64> {
 pub(super) const PLAUSIBLE_LENGTH_M: f64 = 0.005;
 pub(super) const PLAUSIBLE_ANGLE_RAD: f64 = 0.01;
 pub(super) const PLAUSIBLE_COMPLIANCE: f64 = 0.01;
-/// The smallest measurement noise (m, per coordinate) the determination assumes, whatever the estimate
-/// ([`super::noise`]): a tracker's resolution, so that exactly repeated noise-free points do not make
-/// parameters of sub-micrometre effect "determined".
-pub const MIN_NOISE_M: f64 = 2e-6;
 
 /// A parameter the training data do not determine: its standard deviation from these points (at the
 /// assumed noise), and why, in words.

@@ -77,8 +77,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use gravity::GravityModel;
-pub use identify::{Identification, MIN_NOISE_M, Undetermined, plausible_size};
-pub use noise::{MIN_REPEAT_DOF, Noise, NoiseSource, SPEC_NOISE_M};
+pub use identify::{Identification, Undetermined, plausible_size};
+pub use noise::{MIN_NOISE_M, MIN_REPEAT_DOF, Noise, NoiseSource, SPEC_NOISE_M};
 use params::State;
 pub use params::{Param, candidates};
 use problem::Problem;

@@ -18,12 +18,16 @@
 use nalgebra::{DVector, Point3};
 use serde::{Deserialize, Serialize};
 
-use super::identify::MIN_NOISE_M;
 use crate::calib::rigid::centre;
 use crate::calib::tracker_frame::{Registration, fit_tracker_frame};
 use crate::dataset::{Dataset, repeat_groups};
 use crate::error::Result;
 use crate::robot::dh::DhChain;
+
+/// The smallest measurement noise (m, per coordinate) the determination assumes, whatever the estimate: a
+/// tracker's resolution, so that exactly repeated noise-free points do not make
+/// parameters of sub-micrometre effect "determined".
+pub const MIN_NOISE_M: f64 = 2e-6;
 
 /// A laser tracker's noise per coordinate (m) when nothing better is known: the RMS over the three axes of
 /// the typical errors, which Leica states are half of the maximum permissible errors (Leica Absolute Tracker
