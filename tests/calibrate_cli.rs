@@ -837,7 +837,8 @@ fn apply_reports_a_singular_configuration_per_row() {
     std::fs::write(
         &joints,
         format!(
-            "point_id,{}\nstraight,0,0,0,0,0,0,0\nbent,0.1,0.6,0.0,-1.6,0.0,-0.8,0.0\n",
+            // The temperature: the model (`paper-rotxyz`) regressed on it, so `apply` needs it.
+            "point_id,{},temperature\nstraight,0,0,0,0,0,0,0,20.5\nbent,0.1,0.6,0.0,-1.6,0.0,-0.8,0.0,20.5\n",
             names.join(",")
         ),
     )
