@@ -238,6 +238,23 @@ impl Scenario {
                 chain.dof()
             )));
         }
+        // A posture outside the limits is one the arm cannot take: inverse kinematics drawn toward it would
+        // start from there and the campaign's anchor would be no pose of the arm.
+        let posture = self.campaign.posture_rad();
+        if let Some((j, v)) = chain
+            .joints
+            .iter()
+            .zip(&posture)
+            .find(|(j, v)| !j.within_limits(**v))
+        {
+            return Err(scenario_err(format!(
+                "campaign.posture_deg: {} = {:.2} deg is outside the joint's limits [{:.2}, {:.2}] deg",
+                j.name,
+                v.to_degrees(),
+                j.lower.to_degrees(),
+                j.upper.to_degrees()
+            )));
+        }
         Ok(chain)
     }
 }

@@ -284,6 +284,19 @@ fn cases(f: &Fixture) -> Vec<Case> {
             vec!["truth.damping_ratio = 0", "(0, 2]"],
         ),
         (
+            "a posture outside the joint limits",
+            edit(
+                &small,
+                "posture_deg = [0.0, 30.0, 0.0, -90.0, 0.0, -30.0, 0.0]",
+                "posture_deg = [0.0, 30.0, 0.0, -90.0, 0.0, -30.0, 200.0]",
+            ),
+            vec![
+                "campaign.posture_deg",
+                "iiwa_joint_7 = 200.00 deg",
+                "limits",
+            ],
+        ),
+        (
             "not TOML",
             "name = \"x\"\n[[regions]\n".into(),
             vec!["line 2"],

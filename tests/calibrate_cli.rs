@@ -473,10 +473,11 @@ fn a_split_column_is_honoured() {
 
 /// Fits `data` into `out`, applies the model to the same file, and checks that the predicted positions (and
 /// with `orientation` the quaternions) equal predictions.csv's bit for bit, and that the corrected commands
-/// are close to the input with a negligible residual. Returns the largest command change (rad).
-fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
+/// are close to the input with a negligible residual. `extra`: more flags of the fit (its method). Returns
+/// the largest command change (rad).
+fn round_trip(dir: &TempDir, data: &Path, orientation: bool, extra: &[&str]) -> f64 {
     let out = dir.path().join("fit");
-    fit_ok(data, &out, &["--method", "paper-rotxyz"]);
+    fit_ok(data, &out, extra);
     let model = out.join("model.json");
     let apply_dir = dir.path().join("apply");
     let applied = apply_dir.join("applied.csv");
@@ -565,7 +566,7 @@ fn round_trip(dir: &TempDir, data: &Path, orientation: bool) -> f64 {
 fn saved_model_applied_reproduces_the_predictions() {
     let dir = TempDir::new().unwrap();
     let data = campaign(&dir, "paper", &small_paper(POINTS));
-    let change = round_trip(&dir, &data.join("measurements.csv"), false);
+    let change = round_trip(&dir, &data.join("measurements.csv"), false, &["--method", "paper-rotxyz"]);
     assert!(
         change <= 0.01,
         "corrected commands differ from the input by up to {change} rad"
@@ -577,15 +578,131 @@ fn saved_model_applied_reproduces_the_predictions() {
 #[test]
 fn saved_nest_model_applied_reproduces_positions_and_orientations() {
     let dir = TempDir::new().unwrap();
-    // On the ideal truth: its campaign has no temperature column, and `apply` reads joints only, so a model
-    // that regressed on the shipped scenario's temperature would be applied at the training mean instead.
+    // On the ideal truth: its campaign has no temperature column (a model that regressed on it is
+    // `apply_passes_the_temperature_to_a_model_that_regressed_on_it`).
     let pose = edit(
         &ideal_elastic_pose(),
         "points = 875",
         &format!("points = {POSE_POINTS}"),
     );
     let data = campaign(&dir, "pose", &pose);
-    round_trip(&dir, &data.join("measurements.csv"), true);
+    round_trip(&dir, &data.join("measurements.csv"), true, &["--method", "paper-rotxyz"]);
+}
+
+/// A model that regressed on the temperature gets each configuration's own: `apply` reproduces the fit's
+/// predictions.csv bit for bit (at the training mean it would not), the temperatures mirrored within their
+/// training range move its predictions,
+/// and a file without the column is refused on one line naming it and the file, with nothing written.
+#[test]
+fn apply_passes_the_temperature_to_a_model_that_regressed_on_it() {
+    let dir = TempDir::new().unwrap();
+    // A 10 K warm-up within the campaign (the shipped 3 K over 30 min leaves ~30 µm, which the regression
+    // rightly ignores): about 0.2 mm over a metre of aluminium, which it takes up.
+    let warm_up = edit(
+        &small_paper(POINTS),
+        "start_c = 20.0, end_c = 23.0, time_constant_s = 1800.0",
+        "start_c = 20.0, end_c = 30.0, time_constant_s = 300.0",
+    );
+    let data = campaign(&dir, "paper", &warm_up).join("measurements.csv");
+    round_trip(&dir, &data, false, &["--method", "residual-ridge"]);
+    let model = dir.path().join("fit").join("model.json");
+    let saved = std::fs::read_to_string(&model).unwrap();
+    assert!(
+        saved.contains("\"temperature\""),
+        "the model took no temperature"
+    );
+    let table = Csv::read(&data);
+    let t = table.col("temperature");
+    // Each configuration at the temperature mirrored within the training range: still inside the domain.
+    let temps: Vec<f64> = table.rows.iter().map(|r| r[t].parse().unwrap()).collect();
+    let (lo, hi) = temps
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let mut mirrored = Csv::read(&data);
+    for (row, v) in mirrored.rows.iter_mut().zip(&temps) {
+        row[t] = (lo + hi - v).to_string();
+    }
+    let mirrored_path = dir.path().join("mirrored.csv");
+    mirrored.write(&mirrored_path);
+    let applied = |path: &Path, name: &str| {
+        let out = dir.path().join(name);
+        let output = apply_model(&model, path, &out);
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let csv = Csv::read(&out);
+        let x = csv.col("predicted_x");
+        csv.rows
+            .iter()
+            .map(|r| r[x].parse::<f64>().unwrap())
+            .collect::<Vec<f64>>()
+    };
+    let (at, other) = (
+        applied(&data, "at.csv"),
+        applied(&mirrored_path, "mirrored_applied.csv"),
+    );
+    let moved = at.iter().zip(&other).filter(|(a, b)| a != b).count();
+    assert!(
+        10 * moved >= 9 * at.len(),
+        "the mirrored temperature moved {moved} of {} predictions",
+        at.len()
+    );
+    let mut cold = Csv::read(&data);
+    cold.header.remove(t);
+    for row in &mut cold.rows {
+        row.remove(t);
+    }
+    let cold_path = dir.path().join("no_temperature.csv");
+    cold.write(&cold_path);
+    let out_dir = dir.path().join("refused");
+    let output = apply_model(&model, &cold_path, &out_dir.join("applied.csv"));
+    assert_clean_failure(
+        &output,
+        &out_dir,
+        &["no column 'temperature'", &cold_path.display().to_string()],
+    );
+}
+
+/// Only a model with a regression part is warned about configurations outside its training domain: a
+/// kinematic fit extrapolates nothing. The same file, with a configuration far from the training data, warns
+/// for `residual-ridge` and not for `kinematic`, whose `domain` column still says where the point lies.
+#[test]
+fn only_a_regression_is_warned_about_the_training_domain() {
+    let dir = TempDir::new().unwrap();
+    let data = campaign(&dir, "paper", &small_paper(POINTS)).join("measurements.csv");
+    let mut far = Csv::read(&data);
+    for (k, v) in [(1, 2.9), (2, -1.9), (4, 0.3), (6, -1.9)] {
+        let c = far.col(&format!("iiwa_joint_{k}"));
+        far.rows[0][c] = v.to_string();
+    }
+    let far_path = dir.path().join("far.csv");
+    far.write(&far_path);
+    let warned = |method: &str| {
+        let fit = dir.path().join(format!("fit_{method}"));
+        fit_ok(&data, &fit, &["--method", method]);
+        let out = dir.path().join(format!("{method}.csv"));
+        let output = apply_model(&fit.join("model.json"), &far_path, &out);
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let applied = Csv::read(&out);
+        assert!(
+            applied.rows[0][applied.col("domain")].starts_with("outside"),
+            "{method}: the far configuration is inside"
+        );
+        String::from_utf8_lossy(&output.stderr).contains("training domain")
+    };
+    assert!(warned("residual-ridge"), "residual-ridge is not warned");
+    assert!(
+        !warned("kinematic"),
+        "kinematic is warned about a regression it does not have"
+    );
 }
 
 /// The campaign's measurements.csv rewritten by `change`.
@@ -733,7 +850,8 @@ fn apply_reports_a_singular_configuration_per_row() {
     std::fs::write(
         &joints,
         format!(
-            "point_id,{}\nstraight,0,0,0,0,0,0,0\nbent,0.1,0.6,0.0,-1.6,0.0,-0.8,0.0\n",
+            // The temperature: the model (`paper-rotxyz`) regressed on it, so `apply` needs it.
+            "point_id,{},temperature\nstraight,0,0,0,0,0,0,0,20.5\nbent,0.1,0.6,0.0,-1.6,0.0,-0.8,0.0,20.5\n",
             names.join(",")
         ),
     )

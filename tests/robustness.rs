@@ -122,7 +122,7 @@ fn apply_like(model: &dyn Fitted, q: &[f64]) {
         &[q.to_vec()],
     );
     let _ = model.predict(q);
-    let _ = model.compensate(q);
+    let _ = model.compensate(q, &[]);
 }
 
 proptest! {

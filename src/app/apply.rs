@@ -1,14 +1,14 @@
 //! The `calibrate apply` job: a saved model's predicted poses and corrected joint commands for new joint
 //! configurations.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use nalgebra::{Point3, UnitQuaternion};
 
 use crate::calib::registry::SavedModel;
-use crate::dataset;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
+use crate::dataset::{self, MOTION_INPUT_PREFIX};
 use crate::error::{Error, Result};
 use crate::output;
 
@@ -69,6 +69,12 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         }
         None => dataset::read_joints(&options.data, &joint_names)?,
     };
+    let inputs = extra_inputs(
+        &options.data,
+        options.mapping.as_deref(),
+        model.input_names(),
+        ids.len(),
+    )?;
     let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
     JointRange::plausible(&joint_names, &prismatic).check(
         &options.data.display().to_string(),
@@ -101,14 +107,14 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
     // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
     let (mut singular, mut outside) = (0, 0);
-    for (id, q) in ids.iter().zip(&configurations) {
-        let p = model.predict(q);
+    for ((id, q), x) in ids.iter().zip(&configurations).zip(&inputs) {
+        let p = model.predict_with(q, x);
         let r: UnitQuaternion<f64> = p.orientation;
         let pos: Point3<f64> = p.position;
         let mut row = vec![id.clone()];
         row.extend(q.iter().map(|v| v.to_string()));
         row.extend([pos.x, pos.y, pos.z, r.w, r.i, r.j, r.k].map(|v| v.to_string()));
-        match model.compensate(q) {
+        match model.compensate(q, x) {
             Ok((command, residual)) => {
                 row.extend(command.iter().map(|v| v.to_string()));
                 row.push(residual.to_string());
@@ -120,8 +126,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
                 row.push(format!("no command: {}", e.detail()));
             }
         }
-        // Extra inputs are not read here: the model takes their training means, always inside.
-        let placement = test_points::place(model.as_ref(), q, &[]);
+        let placement = test_points::place(model.as_ref(), q, x);
         outside += usize::from(!placement.inside);
         row.push(placement.distance_rad.to_string());
         row.push(test_points::domain_cell(&placement));
@@ -135,7 +140,8 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         configurations: ids.len(),
         without_command: singular,
         outside_domain: outside,
-        warnings: (outside > 0)
+        // Only a regression extrapolates: a model without one has nothing to fade out there.
+        warnings: (outside > 0 && model.has_regression())
             .then(|| {
                 format!(
                     "{outside} of {} configurations lie outside the model's training domain (column `domain`); \
@@ -147,4 +153,44 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
             .collect(),
         out: out.clone(),
     })
+}
+
+/// Per configuration of `data`, the extra inputs the model regressed on, in `names` order: each from the
+/// file's column of that name (or the column `mapping`'s `[inputs]` gives it), which must exist; a motion
+/// input ([`MOTION_INPUT_PREFIX`]) is zero, the arm at rest, as corrected commands are used. Without
+/// inputs, an empty list for each of the file's `rows` configurations.
+fn extra_inputs(
+    data: &Path,
+    mapping: Option<&Path>,
+    names: &[String],
+    rows: usize,
+) -> Result<Vec<Vec<f64>>> {
+    let read: Vec<String> = names
+        .iter()
+        .filter(|n| !n.starts_with(MOTION_INPUT_PREFIX))
+        .cloned()
+        .collect();
+    if names.is_empty() {
+        return Ok(vec![Vec::new(); rows]);
+    }
+    let values = match mapping {
+        Some(path) => ColumnMapping::load(path)?.read_inputs(data, &read)?,
+        None => dataset::read_inputs(data, &read)?,
+    };
+    Ok(values
+        .into_iter()
+        .map(|row| {
+            let mut row = row.into_iter();
+            names
+                .iter()
+                .map(|n| {
+                    if n.starts_with(MOTION_INPUT_PREFIX) {
+                        0.0
+                    } else {
+                        row.next().unwrap_or(f64::NAN)
+                    }
+                })
+                .collect()
+        })
+        .collect())
 }

@@ -522,7 +522,8 @@ fn report(
             test.len()
         ));
     }
-    if outside > 0 {
+    // Only a regression extrapolates: a model without one (a kinematic fit) has nothing to fade out there.
+    if outside > 0 && model.has_regression() {
         report.warnings.push(format!(
             "{outside} of {} test points lie outside the model's training domain (joint or input ranges, or \
              far from every training configuration; `status` in test_points.csv); a regression is not \

@@ -19,9 +19,9 @@ use serde::Serialize;
 use crate::calib::method::FitContext;
 use crate::calib::registry::{CLASSICAL, MethodKind, REFERENCE};
 use crate::calib::regression::RegressionOptions;
-use crate::dataset::Dataset;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
+use crate::dataset::{Dataset, repeat_groups};
 use crate::error::{Error, Result};
 use crate::eval::curve::{CurveDraw, CurvePlan, learning_curve};
 use crate::eval::protocol::{self, METHODS, Row, Table, TestSet, without_inputs};
@@ -356,15 +356,11 @@ fn repeats_md(series: &[Dataset]) -> String {
          | series | groups | measurements | mean | p95 | max |\n|---|---|---|---|---|---|\n",
     );
     for ((name, _), data) in SERIES.iter().zip(series) {
-        let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
-        for (i, q) in data.q.iter().enumerate() {
-            let key = q.iter().map(|v| (v * 1e3).round() as i64).collect();
-            groups.entry(key).or_default().push(i);
-        }
+        let q: Vec<&[f64]> = data.q.iter().map(Vec::as_slice).collect();
+        let groups = repeat_groups(&q);
         let mut distances = Vec::new();
-        let mut n_groups = 0;
-        for members in groups.values().filter(|m| m.len() > 1) {
-            n_groups += 1;
+        let n_groups = groups.len();
+        for members in &groups {
             let points: Vec<_> = members.iter().map(|&i| data.measured[i][0]).collect();
             let mean = centre(&points);
             distances.extend(points.iter().map(|p| (p - mean).norm() * 1e3));

@@ -237,6 +237,12 @@ pub trait Fitted: Any + Send + Sync {
     fn models_orientation(&self) -> bool {
         false
     }
+    /// Whether part of the model is a regression (on the joint angles or the extra inputs): only that part
+    /// extrapolates outside the training domain and fades out there ([`super::domain`]), so only such a
+    /// model is warned about points outside it.
+    fn has_regression(&self) -> bool {
+        false
+    }
     /// Method-specific facts for `report.json` (kept parameters, R², rank, condition number…), given the
     /// test observations.
     fn report(&self, test: &[Observation]) -> serde_json::Value;
@@ -248,20 +254,22 @@ pub trait Fitted: Any + Send + Sync {
     }
 
     /// Joint angles, from `seed`, at which this model puts the measured point at `target` (and the flange at
-    /// `orientation` when the method models it). Gauss–Newton on the nominal Jacobian: every model differs
-    /// from the nominal one by a fraction of a millimetre. Returns the command and the remaining distance (m).
+    /// `orientation` when the method models it), with the extra inputs `inputs` ([`Fitted::predict_with`]).
+    /// Gauss–Newton on the nominal Jacobian: every model differs from the nominal one by a fraction of a
+    /// millimetre. Returns the command and the remaining distance (m).
     fn command_for(
         &self,
         target: &Point3<f64>,
         orientation: Option<&UnitQuaternion<f64>>,
         seed: &[f64],
+        inputs: &[f64],
     ) -> Result<(Vec<f64>, f64)> {
         let rotation = orientation.filter(|_| self.models_orientation());
         let rows = if rotation.is_some() { 6 } else { 3 };
         let mut q = seed.to_vec();
         let mut err = f64::INFINITY;
         for _ in 0..20 {
-            let pred = self.predict(&q);
+            let pred = self.predict_with(&q, inputs);
             if !numeric::all_finite(
                 pred.position
                     .coords
@@ -323,10 +331,11 @@ pub trait Fitted: Any + Send + Sync {
         }
     }
 
-    /// The command that makes the calibrated model reach what the nominal model reaches at `q_intended`.
-    fn compensate(&self, q_intended: &[f64]) -> Result<(Vec<f64>, f64)> {
+    /// The command that makes the calibrated model reach what the nominal model reaches at `q_intended`,
+    /// with the extra inputs `inputs` (empty: their training means).
+    fn compensate(&self, q_intended: &[f64], inputs: &[f64]) -> Result<(Vec<f64>, f64)> {
         let (p, r) = self.nominal(q_intended);
-        self.command_for(&p, Some(&r), q_intended)
+        self.command_for(&p, Some(&r), q_intended, inputs)
     }
 }
 

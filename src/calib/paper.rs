@@ -537,6 +537,11 @@ impl Fitted for PaperModel {
         self.prediction(q, inputs)
     }
 
+    /// The error parameters of the paper's models are regressions; `nominal` has none.
+    fn has_regression(&self) -> bool {
+        self.kind.is_some()
+    }
+
     /// Without orientation parameters the flange turns as the position parameters turn it (their frames are
     /// rigid), so a point elsewhere on the flange moves with them.
     fn predicted_flange(&self, q: &[f64], inputs: &[f64]) -> nalgebra::Isometry3<f64> {

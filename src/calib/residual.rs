@@ -267,6 +267,10 @@ impl Fitted for ResidualModel {
         self.residual.extra_inputs()
     }
 
+    fn has_regression(&self) -> bool {
+        true
+    }
+
     /// Outside the training domain the residual is evaluated as [`Domain::regression_inputs`] says.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let (qc, ic, w) = self.basis.domain.regression_inputs(q, inputs);
@@ -413,6 +417,10 @@ impl Fitted for HybridFitted {
 
     fn input_names(&self) -> &[String] {
         self.saved.residual.extra_inputs()
+    }
+
+    fn has_regression(&self) -> bool {
+        true
     }
 
     /// The base predicts from the joint angles (its residual was fitted against exactly that); the extra

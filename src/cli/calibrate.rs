@@ -122,11 +122,12 @@ struct ApplyArgs {
     /// A `model.json` written by `calibrate`.
     #[arg(long)]
     model: PathBuf,
-    /// Joint configurations: a CSV with one column per joint of the model (extra columns are ignored).
+    /// Joint configurations: a CSV with one column per joint of the model, and one per extra input the model
+    /// regressed on (e.g. `temperature`; a file without it is refused). Other columns are ignored.
     #[arg(long)]
     data: PathBuf,
-    /// A column mapping (TOML) for reading `--data` (only its joint columns and `point_id` are used; extra
-    /// inputs such as the temperature take their training means).
+    /// A column mapping (TOML) for reading `--data` (only its joint columns, `point_id` and the `[inputs]`
+    /// the model regressed on are used).
     #[arg(long)]
     mapping: Option<PathBuf>,
     /// Output directory, relative to the current directory: applied.csv (predicted poses, corrected commands

@@ -324,6 +324,31 @@ impl ColumnMapping {
         Ok((ids, q))
     }
 
+    /// The extra inputs `names` of every row (for `calibrate apply` of a model that regressed on them), each
+    /// from the column the mapping's `[inputs]` gives it, in `names` order. A name the mapping does not map,
+    /// or a column the file lacks, is one error naming it.
+    pub fn read_inputs(&self, path: &Path, names: &[String]) -> Result<Vec<Vec<f64>>> {
+        let origin = path.display().to_string();
+        let table = self.table(path, &origin)?;
+        let cols = names
+            .iter()
+            .map(|name| match self.inputs.get(name) {
+                Some(c) => table.find(c, &format!("[inputs] {name}")),
+                None => Err(Error::Data {
+                    origin: origin.clone(),
+                    message: format!(
+                        "the mapping's [inputs] names no column for '{name}', which the model regressed on \
+                         (its extra inputs: {})",
+                        names.join(", ")
+                    ),
+                }),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        (0..table.rows.len())
+            .map(|r| cols.iter().map(|&c| table.number(r, c)).collect())
+            .collect()
+    }
+
     fn table(&self, path: &Path, origin: &str) -> Result<CsvTable> {
         let err = |message: String| Error::Data {
             origin: origin.to_string(),

@@ -303,6 +303,48 @@ impl Dataset {
     }
 }
 
+/// The extra inputs `names` of every row of a file of joint configurations (for applying a model that
+/// regressed on them), one column each, in `names` order. A missing column is one error naming it.
+pub fn read_inputs(path: &Path, names: &[String]) -> Result<Vec<Vec<f64>>> {
+    inputs_from_reader(open(path)?, &path.display().to_string(), names)
+}
+
+/// [`read_inputs`] from any reader; `origin` names it in messages.
+pub fn inputs_from_reader(
+    reader: impl std::io::Read,
+    origin: &str,
+    names: &[String],
+) -> Result<Vec<Vec<f64>>> {
+    let table = CsvTable::load(reader, origin, Dialect::PLAIN)?;
+    let cols = names
+        .iter()
+        .map(|name| {
+            table.column(name).ok_or_else(|| {
+                table.error(format!(
+                    "no column '{name}': the model regressed on it (its extra inputs: {}), so each \
+                     configuration needs its value; the header has: {}",
+                    names.join(", "),
+                    table.header_summary()
+                ))
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    (0..table.rows.len())
+        .map(|r| table.numbers(r, &cols))
+        .collect()
+}
+
+/// Configurations measured more than once: the indices of each group of `q` whose joint angles agree to
+/// 1 mrad (rounded to it), groups of two or more only, in the order of their angles.
+pub fn repeat_groups(q: &[&[f64]]) -> Vec<Vec<usize>> {
+    let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
+    for (i, q) in q.iter().enumerate() {
+        let key = q.iter().map(|v| (v * 1e3).round() as i64).collect();
+        groups.entry(key).or_default().push(i);
+    }
+    groups.into_values().filter(|m| m.len() > 1).collect()
+}
+
 /// Joint configurations only (for applying a model to commands): the `point_id` column (or row
 /// numbers, as in [`Dataset`]) and the angles (rad) in `joint_names` order. Other columns are ignored.
 pub fn read_joints(path: &Path, joint_names: &[String]) -> Result<(Vec<String>, Vec<Vec<f64>>)> {

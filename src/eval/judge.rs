@@ -104,7 +104,7 @@ pub fn closed_loop_errors(
                     .filter(|_| with_orientation);
                 let in_method = target_rotation.map(|r| to_method.rotation * r);
                 let (command, _) = model
-                    .command_for(&(to_method * target), in_method.as_ref(), &p.q_cmd)
+                    .command_for(&(to_method * target), in_method.as_ref(), &p.q_cmd, &[])
                     .map_err(|e| e.to_string())?;
                 let reached = robot
                     .flange_pose(&command, state)

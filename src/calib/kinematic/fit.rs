@@ -1,22 +1,22 @@
 //! The steps of [`KinematicModel::fit_with`](super::KinematicModel::fit_with), in its order: check the points,
-//! choose the candidates and their structural set, the noise the training data are judged at, the solve within
+//! choose the candidates and their structural set, the solve judged at the noise of the measurement and within
 //! the compliances' bound (which decides what the data determine), the residual RMS, and the refined
-//! registration the model keeps.
+//! registration (or the base error frame) the model keeps.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Translation3, UnitQuaternion};
 
 use super::gravity::GravityModel;
 use super::identify::{
-    self, Identifiability, MIN_NOISE_M, Undetermined, determined, identifiability,
-    standard_deviations, structural_set,
+    self, Identifiability, Undetermined, determined, identifiability, standard_deviations,
+    structural_set,
 };
+use super::noise::{self, Noise};
 use super::params::{Param, State, candidates};
 use super::problem::{Point, Problem};
 use super::solve::{self, minimize};
 use crate::calib::error_model::ErrorFrames;
 use crate::calib::method::{FitContext, MethodInfo};
-use crate::calib::rigid::centre;
-use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame, fit_tracker_frame};
+use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
@@ -68,11 +68,15 @@ pub(super) fn points(
 
 /// The candidates of a chain of `n` joints, in priority order.
 pub(super) fn candidates_to_fit(n: usize, elastic: bool, base_frame: bool) -> Vec<Param> {
-    // Data in the base frame has no tracker frame to fit: the base's own errors take its place.
+    // Data in the base frame has no tracker frame to fit: the base error frame E_0 takes its place (the
+    // identity registration would otherwise leave the base's placement error to the frames after joint 1,
+    // which cannot hold a tilt before it).
     candidates(n, elastic)
         .into_iter()
-        .filter(|p| {
-            !(base_frame && matches!(p, Param::TrackerRotation(_) | Param::TrackerTranslation(_)))
+        .map(|p| match p {
+            Param::TrackerRotation(k) if base_frame => Param::BaseRotation(k),
+            Param::TrackerTranslation(k) if base_frame => Param::BaseTranslation(k),
+            p => p,
         })
         .collect()
 }
@@ -109,37 +113,6 @@ pub(super) fn jacobian_at_base(
         .expect("jacobian requested")
 }
 
-/// The noise σ (m, per coordinate) the training data are judged at.
-pub(super) fn nominal_noise(
-    dh: &DhChain,
-    registration: &Registration,
-    train: &Dataset,
-    val: &Dataset,
-) -> Result<f64> {
-    // The noise is what the nominal model leaves after a rigid registration. Data in the base frame are
-    // registered by the identity, whose residual also holds the base's own placement error — which this fit
-    // identifies; judged at that residual, parameters were dropped that a tracker-frame fit keeps
-    // (`kinematic` 0.208, now 0.190, against 0.134 mm in the tracker frame on the same points).
-    let nominal_rms = if registration.base_frame {
-        let measured: Vec<_> = train
-            .measured
-            .iter()
-            .chain(&val.measured)
-            .map(|m| centre(m))
-            .collect();
-        let flanges: Vec<_> = train
-            .q
-            .iter()
-            .chain(&val.q)
-            .map(|q| dh.flange_pose(q))
-            .collect();
-        fit_tracker_frame(&measured, &flanges, &registration.frame.mounting)?.rms
-    } else {
-        registration.frame.rms
-    };
-    Ok((nominal_rms / 3f64.sqrt()).max(MIN_NOISE_M))
-}
-
 /// What [`solve_within_bounds`] leaves: the kept parameters, their values and standard deviations, the
 /// identifiability and the minimum it reached, the structurally identifiable parameters the data do not
 /// determine, and the compliances held at their bound.
@@ -151,16 +124,83 @@ pub(super) struct Solution {
     pub(super) values: Vec<f64>,
     pub(super) std: Vec<f64>,
     pub(super) at_bound: Vec<Undetermined>,
+    /// The residual rows at the fitted values.
+    pub(super) residual: DVector<f64>,
+    /// The noise the kept set was judged at.
+    pub(super) noise: Noise,
 }
 
-/// The parameters of `structural` that the data determine at noise `sigma`, fitted by Levenberg–Marquardt in at
-/// most `max_evaluations` evaluations.
-pub(super) fn solve_within_bounds(
+/// How many times [`solve_judged`] judges the kept set again at the fitted residual and refits: the set
+/// settles after one or two.
+const MAX_REJUDGEMENTS: usize = 4;
+
+/// The parameters of `structural` the data determine, judged at the noise of the measurement and fitted
+/// ([`super::noise`]): first at `start` (the nominal model's residual), then, as long as judging at the
+/// fitted model's own residual (at least `floor`) keeps another set, refitted with that set — so the set a
+/// fit ends with is the one its own residual determines (checked once more after the last fit). A set met
+/// before ends the search (the last fit stands), and so does a refit that fails: the set before it, whose fit
+/// converged, stands, judged at the noise it was judged at.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn solve_judged(
     probe: &mut Problem,
     base: &State,
     j_struct: &DMatrix<f64>,
     structural: &[Param],
-    sigma: f64,
+    start: Noise,
+    floor: Noise,
+    max_evaluations: usize,
+    method: &MethodInfo,
+) -> Result<Solution> {
+    let mut solution = solve_within_bounds(
+        probe,
+        base,
+        j_struct,
+        structural,
+        start,
+        max_evaluations,
+        method,
+    )?;
+    let mut tried = vec![solution.kept.clone()];
+    for _ in 0..MAX_REJUDGEMENTS {
+        let at_fit = noise::fitted(&solution.residual, solution.kept.len(), floor);
+        let (mut kept, mut undetermined) =
+            determined(j_struct, structural, at_fit, probe.points.len());
+        let bound = |name: &str| solution.at_bound.iter().any(|b| b.parameter == name);
+        kept.retain(|p| !bound(&p.name()));
+        if kept == solution.kept {
+            undetermined.retain(|u| !bound(&u.parameter));
+            solution.undetermined = undetermined;
+            solution.noise = at_fit;
+            break;
+        }
+        if tried.contains(&kept) {
+            break;
+        }
+        tried.push(kept);
+        match solve_within_bounds(
+            probe,
+            base,
+            j_struct,
+            structural,
+            at_fit,
+            max_evaluations,
+            method,
+        ) {
+            Ok(refit) => solution = refit,
+            Err(_) => break,
+        }
+    }
+    Ok(solution)
+}
+
+/// The parameters of `structural` that the data determine at `noise`, fitted by Levenberg–Marquardt in at
+/// most `max_evaluations` evaluations.
+fn solve_within_bounds(
+    probe: &mut Problem,
+    base: &State,
+    j_struct: &DMatrix<f64>,
+    structural: &[Param],
+    noise: Noise,
     max_evaluations: usize,
     method: &MethodInfo,
 ) -> Result<Solution> {
@@ -169,10 +209,16 @@ pub(super) fn solve_within_bounds(
     let mut at_bound: Vec<Undetermined> = Vec::new();
     loop {
         let (mut kept, mut undetermined) =
-            determined(j_struct, structural, sigma, probe.points.len());
+            determined(j_struct, structural, noise, probe.points.len());
         let bound = |p: &Param| at_bound.iter().any(|u| u.parameter == p.name());
         kept.retain(|p| !bound(p));
-        let (id, minimum, values, std) = solve_kept(probe, base, &kept, max_evaluations, method)?;
+        let Fit {
+            id,
+            minimum,
+            values,
+            std,
+            residual,
+        } = solve_kept(probe, base, &kept, max_evaluations, method)?;
         let negative = kept
             .iter()
             .zip(&values)
@@ -203,6 +249,8 @@ pub(super) fn solve_within_bounds(
             values,
             std,
             at_bound,
+            residual,
+            noise,
         });
     }
 }
@@ -230,10 +278,13 @@ pub(super) fn refined(
     evaluations: usize,
 ) -> Registration {
     let initial = registration.frame.tracker_to_base;
-    let refined = Isometry3::from_parts(
-        Translation3::from(state.t),
-        UnitQuaternion::from_scaled_axis(state.rho),
-    ) * initial;
+    // In the base frame the fitted rigid motion is the base error frame the model keeps
+    // ([`base_error`]); the registration stays the identity.
+    let refined = if registration.base_frame {
+        initial
+    } else {
+        measured_motion(state) * initial
+    };
     Registration {
         frame: TrackerFrame {
             tracker_to_base: refined,
@@ -247,6 +298,32 @@ pub(super) fn refined(
     }
 }
 
+/// What [`solve_kept`] leaves: the identifiability, the minimum, the values, their standard deviations and
+/// the residual rows there.
+struct Fit {
+    id: Identifiability,
+    minimum: solve::Minimum,
+    values: Vec<f64>,
+    std: Vec<f64>,
+    residual: DVector<f64>,
+}
+
+/// The rigid motion the tracker-frame (or base-frame) parameters apply to the measured points.
+fn measured_motion(state: &State) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(state.t),
+        UnitQuaternion::from_scaled_axis(state.rho),
+    )
+}
+
+/// For data in the base frame, the base error frame `E_0`: the model predicts `E_0 · FK_E(q)`, which is the
+/// fit of the measured points moved by the inverse of `E_0`.
+pub(super) fn base_error(registration: &Registration, state: &State) -> Option<Isometry3<f64>> {
+    registration
+        .base_frame
+        .then(|| measured_motion(state).inverse())
+}
+
 /// Levenberg–Marquardt on `kept` from the base state (at most `max_evaluations` evaluations): the rank check first (a rank below the set's size is
 /// refused, naming the least determined), then the fit, its values and their standard deviations.
 fn solve_kept(
@@ -255,7 +332,7 @@ fn solve_kept(
     kept: &[Param],
     max_evaluations: usize,
     method: &MethodInfo,
-) -> Result<(Identifiability, solve::Minimum, Vec<f64>, Vec<f64>)> {
+) -> Result<Fit> {
     probe.params = kept.to_vec();
     let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
     let (_, j0) = probe.evaluate(&x0, true);
@@ -294,7 +371,13 @@ fn solve_kept(
     let values: Vec<f64> = minimum.x.iter().copied().collect();
     let (r, j) = probe.evaluate(&values, true);
     let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
-    Ok((id, minimum, values, std))
+    Ok(Fit {
+        id,
+        minimum,
+        values,
+        std,
+        residual: r,
+    })
 }
 
 /// What the structural analysis drops, in words: a compliance because gravity (and the declared payload)

@@ -8,6 +8,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::gravity::GravityModel;
+use super::noise::Noise;
 use super::params::{Param, State, candidates};
 use super::problem::{Point, Problem};
 use crate::calib::method::FitContext;
@@ -193,11 +194,16 @@ pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiabi
 /// The largest size a parameter of a real arm has, against which "the data determine it" is judged: a
 /// frame error of 5 mm or 10 mrad is already a damaged arm (catalogue arms are built to tenths of a
 /// millimetre and a few milliradians; the UR10 fitted here errs by 0.3 mm and 0.5–0.8 mrad), and a joint that turns 10 mrad under a newton-metre holds no load
-/// (measured arms: 1e-6 to 3e-4 rad/Nm). The tracker frame and the mounting have no such size: they are kept
-/// whatever the data, and must be determined (else the fit is refused).
-pub(super) fn plausible_size(p: Param) -> Option<f64> {
+/// (measured arms: 1e-6 to 3e-4 rad/Nm). The tracker frame (or, for data in the base frame, the base error
+/// frame, which holds the base's placement in whatever frame the data were put in) and the mounting have no
+/// such size: they are kept whatever the data, and must be determined (else the fit is refused).
+pub fn plausible_size(p: Param) -> Option<f64> {
     match p {
-        Param::TrackerRotation(_) | Param::TrackerTranslation(_) | Param::Mounting(_) => None,
+        Param::TrackerRotation(_)
+        | Param::TrackerTranslation(_)
+        | Param::BaseRotation(_)
+        | Param::BaseTranslation(_)
+        | Param::Mounting(_) => None,
         Param::Error(e) if e.component <= 3 => Some(PLAUSIBLE_LENGTH_M),
         Param::Error(_) => Some(PLAUSIBLE_ANGLE_RAD),
         Param::Compliance(_) => Some(PLAUSIBLE_COMPLIANCE),
@@ -208,9 +214,6 @@ pub(super) fn plausible_size(p: Param) -> Option<f64> {
 pub(super) const PLAUSIBLE_LENGTH_M: f64 = 0.005;
 pub(super) const PLAUSIBLE_ANGLE_RAD: f64 = 0.01;
 pub(super) const PLAUSIBLE_COMPLIANCE: f64 = 0.01;
-/// The smallest measurement noise (m, per coordinate) the determination assumes: a tracker's resolution, so
-/// that noise-free data do not make parameters of sub-micrometre effect "determined".
-pub const MIN_NOISE_M: f64 = 2e-6;
 
 /// A parameter the training data do not determine: its standard deviation from these points (at the
 /// assumed noise), and why, in words.
@@ -234,7 +237,8 @@ fn unit(p: Param) -> &'static str {
 
 /// Which structurally identifiable parameters the training data determine: Gram–Schmidt over the training
 /// Jacobian's columns in priority order (unscaled: a column's size is its effect), keeping a parameter when
-/// its standard deviation given the ones kept before it, `sigma / rest`, is below its [`plausible_size`].
+/// its standard deviation given the ones kept before it, `σ / rest` at the measurement's `noise` σ, is below
+/// its [`plausible_size`].
 /// The rest are held at their nominal values (zero error, no compliance) and returned with the reason. A
 /// column may be weak because it barely moves the measured point at these configurations (a reflector on
 /// the last joint's axis and that joint's rotation about it; an unloaded joint's compliance; too few
@@ -242,9 +246,10 @@ fn unit(p: Param) -> &'static str {
 pub(super) fn determined(
     j: &DMatrix<f64>,
     params: &[Param],
-    sigma: f64,
+    noise: Noise,
     points: usize,
 ) -> (Vec<Param>, Vec<Undetermined>) {
+    let sigma = noise.sigma_m;
     let mut basis: Vec<DVector<f64>> = Vec::new();
     let mut kept_cols: Vec<(usize, DVector<f64>)> = Vec::new();
     let mut kept = Vec::new();
@@ -283,17 +288,20 @@ pub(super) fn determined(
                         });
                     format!(
                         "its effect on these points is nearly that of parameters kept before it{twin}: only {:.1} % \
-                         is its own, so the data would give it a standard deviation of {std:.2e} {u}, more than the \
-                         {size} {u} a real arm's parameter reaches",
-                        own * 100.0
+                         is its own, so the data would give it a standard deviation of {std:.2e} {u} (at {:.2e} mm \
+                         of noise, {}), more than the {size} {u} a real arm's parameter reaches",
+                        own * 100.0,
+                        sigma * 1e3,
+                        noise.source_text()
                     )
                 } else {
                     format!(
                         "it barely moves the measured points at these configurations ({effect:.2e} mm RMS at its \
-                         plausible size of {size} {u}, against {:.2e} mm of noise), so the data would give it a \
-                         standard deviation of {std:.2e} {u}; e.g. a rotation about an axis the reflector sits on, \
-                         or a joint gravity does not load",
-                        sigma * 1e3
+                         plausible size of {size} {u}, against {:.2e} mm of noise, {}), so the data would give it \
+                         a standard deviation of {std:.2e} {u}; e.g. a rotation about an axis the reflector sits \
+                         on, or a joint gravity does not load",
+                        sigma * 1e3,
+                        noise.source_text()
                     )
                 };
                 undetermined.push(Undetermined {

@@ -12,6 +12,11 @@ use crate::calib::error_model::{ErrorModelKind, ErrorParam, FrameErrors};
 pub enum Param {
     TrackerRotation(usize),
     TrackerTranslation(usize),
+    /// The base error frame `E_0` of data already in the base frame, where there is no tracker frame to
+    /// fit: fitted as the rigid motion of the measured points that the tracker frame's parameters are
+    /// (the same columns), kept by the model as its inverse `E_0` before the first joint.
+    BaseRotation(usize),
+    BaseTranslation(usize),
     Mounting(usize),
     Error(ErrorParam),
     Compliance(usize),
@@ -23,6 +28,8 @@ impl Param {
         match self {
             Param::TrackerRotation(k) => format!("tracker_r{}", AXES[*k]),
             Param::TrackerTranslation(k) => format!("tracker_{}", AXES[*k]),
+            Param::BaseRotation(k) => format!("base_r{}", AXES[*k]),
+            Param::BaseTranslation(k) => format!("base_{}", AXES[*k]),
             Param::Mounting(k) => format!("mount_{}", AXES[*k]),
             Param::Error(e) => e.name(),
             Param::Compliance(j) => format!("c{}", j + 1),
@@ -32,7 +39,11 @@ impl Param {
     /// Whether it is a parameter of an `n`-joint chain (compliances only when `elastic`).
     pub fn belongs_to(&self, n: usize, elastic: bool) -> bool {
         match *self {
-            Param::TrackerRotation(k) | Param::TrackerTranslation(k) | Param::Mounting(k) => k < 3,
+            Param::TrackerRotation(k)
+            | Param::TrackerTranslation(k)
+            | Param::BaseRotation(k)
+            | Param::BaseTranslation(k)
+            | Param::Mounting(k) => k < 3,
             Param::Error(e) => (1..=n).contains(&e.frame) && (1..=6).contains(&e.component),
             Param::Compliance(j) => elastic && j < n,
         }
@@ -83,8 +94,8 @@ impl State {
 
     pub(super) fn get(&self, p: Param) -> f64 {
         match p {
-            Param::TrackerRotation(k) => self.rho[k],
-            Param::TrackerTranslation(k) => self.t[k],
+            Param::TrackerRotation(k) | Param::BaseRotation(k) => self.rho[k],
+            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => self.t[k],
             Param::Mounting(k) => self.mount[k],
             Param::Error(e) => self.errors[e.frame - 1][e.component - 1],
             Param::Compliance(j) => self.compliance[j],
@@ -93,8 +104,8 @@ impl State {
 
     pub(super) fn set(&mut self, p: Param, v: f64) {
         match p {
-            Param::TrackerRotation(k) => self.rho[k] = v,
-            Param::TrackerTranslation(k) => self.t[k] = v,
+            Param::TrackerRotation(k) | Param::BaseRotation(k) => self.rho[k] = v,
+            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => self.t[k] = v,
             Param::Mounting(k) => self.mount[k] = v,
             Param::Error(e) => self.errors[e.frame - 1][e.component - 1] = v,
             Param::Compliance(j) => self.compliance[j] = v,

@@ -98,7 +98,7 @@ impl Problem<'_> {
             if let Some(jm) = j.as_mut() {
                 for (c, prm) in self.params.iter().enumerate() {
                     let col: Vector6<f64> = match *prm {
-                        Param::TrackerRotation(k) => {
+                        Param::TrackerRotation(k) | Param::BaseRotation(k) => {
                             let lin = v.cross_matrix() * jl_rho.column(k);
                             let ang = match &rotation {
                                 Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
@@ -106,7 +106,7 @@ impl Problem<'_> {
                             };
                             stack(&lin, &ang)
                         }
-                        Param::TrackerTranslation(k) => {
+                        Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
                             stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
                         }
                         Param::Mounting(k) => stack(
