@@ -566,7 +566,12 @@ fn round_trip(dir: &TempDir, data: &Path, orientation: bool, extra: &[&str]) -> 
 fn saved_model_applied_reproduces_the_predictions() {
     let dir = TempDir::new().unwrap();
     let data = campaign(&dir, "paper", &small_paper(POINTS));
-    let change = round_trip(&dir, &data.join("measurements.csv"), false, &["--method", "paper-rotxyz"]);
+    let change = round_trip(
+        &dir,
+        &data.join("measurements.csv"),
+        false,
+        &["--method", "paper-rotxyz"],
+    );
     assert!(
         change <= 0.01,
         "corrected commands differ from the input by up to {change} rad"
@@ -586,7 +591,12 @@ fn saved_nest_model_applied_reproduces_positions_and_orientations() {
         &format!("points = {POSE_POINTS}"),
     );
     let data = campaign(&dir, "pose", &pose);
-    round_trip(&dir, &data.join("measurements.csv"), true, &["--method", "paper-rotxyz"]);
+    round_trip(
+        &dir,
+        &data.join("measurements.csv"),
+        true,
+        &["--method", "paper-rotxyz"],
+    );
 }
 
 /// A model that regressed on the temperature gets each configuration's own: `apply` reproduces the fit's

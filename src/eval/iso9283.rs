@@ -218,7 +218,7 @@ impl<'a> IsoTest<'a> {
                 .map(|n| to_method.rotation * self.cube.flanges[k].rotation * n);
             let target = to_method * self.targets.tcp[k];
             *command = model
-                .command_for(&target, rotation.as_ref(), &self.cube.q_nominal[k])
+                .command_for(&target, rotation.as_ref(), &self.cube.q_nominal[k], &[])
                 .map_err(|e| format!("{}: {}", POINT_NAMES[k], e.detail()))?
                 .0;
         }
