@@ -644,7 +644,7 @@ fn apply_passes_the_temperature_to_a_model_that_regressed_on_it() {
             "{}",
             String::from_utf8_lossy(&output.stderr)
         );
-        let csv = Csv::read(&out);
+        let csv = Csv::read(&out.join("applied.csv"));
         let x = csv.col("predicted_x");
         csv.rows
             .iter()
@@ -694,14 +694,14 @@ fn only_a_regression_is_warned_about_the_training_domain() {
     let warned = |method: &str| {
         let fit = dir.path().join(format!("fit_{method}"));
         fit_ok(&data, &fit, &["--method", method]);
-        let out = dir.path().join(format!("{method}.csv"));
+        let out = dir.path().join(method);
         let output = apply_model(&fit.join("model.json"), &far_path, &out);
         assert!(
             output.status.success(),
             "{}",
             String::from_utf8_lossy(&output.stderr)
         );
-        let applied = Csv::read(&out);
+        let applied = Csv::read(&out.join("applied.csv"));
         assert!(
             applied.rows[0][applied.col("domain")].starts_with("outside"),
             "{method}: the far configuration is inside"

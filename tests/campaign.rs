@@ -606,8 +606,10 @@ fn the_own_robot_template_parses_and_runs_a_small_campaign() {
     .unwrap();
     assert_eq!(done.measured.n, 60);
     let mean_mm = done.measured.mean * 1e3;
+    // The template's errors are typical sizes, not a calibrated arm's: what is asserted is that they show,
+    // well above the tracker's noise (0.02 mm) and below an uncalibrated arm's few millimetres.
     assert!(
-        (0.25..=2.0).contains(&mean_mm),
+        (0.05..=2.0).contains(&mean_mm),
         "measured mean {mean_mm} mm"
     );
     assert!(out.join("measurements.csv").is_file());

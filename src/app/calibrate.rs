@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
@@ -681,24 +680,4 @@ fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Resu
     }
     w.into_inner()
         .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
-}
-
-/// `calibrate --method`'s values, each with what the method is, as `--help` lists them; parsed once, here.
-pub fn method_values() -> impl TypedValueParser<Value = MethodKind> {
-    PossibleValuesParser::new(
-        MethodKind::ALL.map(|m| PossibleValue::new(m.name()).help(m.info().summary)),
-    )
-    .try_map(|name| MethodKind::parse(&name))
-}
-
-/// `calibrate --test-registration`'s values.
-pub fn registration_values() -> impl TypedValueParser<Value = TestRegistration> {
-    PossibleValuesParser::new([
-        PossibleValue::new("refit").help(
-            "the test campaign's tracker frame and probe mounting, registered on its own points (another \
-             station, another day)",
-        ),
-        PossibleValue::new("model").help("the model's registration (same station and probe)"),
-    ])
-    .try_map(|name| TestRegistration::parse(&name))
 }

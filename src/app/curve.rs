@@ -19,6 +19,7 @@ use crate::output;
 use crate::report::plots::{self, Band};
 use crate::robot::dh::DhChain;
 
+use super::arg_values;
 use super::calibrate::{self, read_measured};
 
 /// The flags of `calibrate curve` (parsed here, so that the binary stays a parser of subcommands).
@@ -42,7 +43,7 @@ pub struct CurveOptions {
     #[arg(long)]
     pub ignore_inputs: bool,
     /// The methods, comma-separated.
-    #[arg(long, value_delimiter = ',', required = true, value_parser = calibrate::method_values())]
+    #[arg(long, value_delimiter = ',', required = true, value_parser = arg_values::method_values())]
     pub methods: Vec<MethodKind>,
     /// Subset sizes, comma-separated: the points each fit draws (2/3 training, 1/3 validation, as `calibrate`
     /// splits 50 % : 25 %), from the three quarters of the file not held out.

@@ -8,6 +8,7 @@
 //! `eval::protocol` on the UR10 series.
 
 pub mod apply;
+pub mod arg_values;
 pub mod calibrate;
 pub mod calibration_report;
 pub mod campaign;

@@ -16,6 +16,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 use crate::app::apply::{self, ApplyOptions};
+use crate::app::arg_values;
 use crate::app::calibrate::{self, FitOptions};
 use crate::app::curve::{self, CurveOptions};
 use crate::app::export::{self, ExportOptions};
@@ -66,7 +67,7 @@ struct FitArgs {
     #[arg(long)]
     test_mapping: Option<PathBuf>,
     /// How the test campaign is registered.
-    #[arg(long, default_value = "refit", value_parser = calibrate::registration_values())]
+    #[arg(long, default_value = "refit", value_parser = arg_values::registration_values())]
     test_registration: TestRegistration,
     /// Drop the data's extra inputs (e.g. temperature) so no method regresses on them.
     #[arg(long)]
@@ -88,7 +89,7 @@ struct FitArgs {
     /// campaigns it is the most accurate on a campaign other than the one it was fitted on (the regression
     /// methods fall back to their constant parts outside their training data), and in the simulated study it
     /// reaches the lowest floor with `hybrid`. Within one campaign's layout the methods end close together.
-    #[arg(long, default_value_t = RECOMMENDED, value_parser = calibrate::method_values())]
+    #[arg(long, default_value_t = RECOMMENDED, value_parser = arg_values::method_values())]
     method: MethodKind,
     /// Mass on the flange (kg), for the gravity torques of the elastic methods.
     #[arg(long, default_value_t = 0.0)]

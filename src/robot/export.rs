@@ -105,7 +105,7 @@ pub fn corrected_urdf(
     }
     // Both flanges are poses in the last body; the probe hangs from the leaf link.
     let probe = (chain.flange.inverse() * leaf.flange).inverse() * correction.probe;
-    finish(robot, &leaf.flange_link, &probe, &chain, compliance, header).map_err(|m| err(m))
+    finish(robot, &leaf.flange_link, &probe, &chain, compliance, header).map_err(err)
 }
 
 /// A chain (a DH table's, which has no URDF) corrected, as URDF text: one link per body as
