@@ -55,16 +55,16 @@ fn repository_dirs(root: &Path) -> Vec<String> {
 
 /// One command line of a page: where it is, and its words.
 #[derive(Debug)]
-struct CommandLine {
-    at: String,
-    text: String,
+pub(crate) struct CommandLine {
+    pub(crate) at: String,
+    pub(crate) text: String,
     /// Whether its relative paths are relative to the repository root (no `cd` before it in its block).
     from_root: bool,
 }
 
 /// The command lines of the shell code blocks of `text` (`sh`, `bash`, `shell`, `console`), continuations
 /// joined, comments and prompts removed; `name` names the page in messages.
-fn shell_lines(name: &str, text: &str) -> Vec<CommandLine> {
+pub(crate) fn shell_lines(name: &str, text: &str) -> Vec<CommandLine> {
     let mut out = Vec::new();
     let (mut in_block, mut shell, mut from_root) = (false, false, true);
     let mut pending: Option<(usize, String)> = None;

@@ -22,6 +22,7 @@ mod kinematic;
 mod magnitudes;
 mod motion;
 mod real_data;
+mod recipes;
 mod recording;
 mod replay;
 mod report;
