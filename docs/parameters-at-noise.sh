@@ -1,18 +1,23 @@
 #!/usr/bin/env bash
-# Usage: run.sh BIN_DIR OUT SEED...   (from the worktree root)
-# The issue-26 case in simulation: paper_iiwa's arm and tracker (reflector on the flange axis, position only),
+# Usage: parameters-at-noise.sh BIN_DIR OUT SEED...   (from the checkout's root)
+# GEOMETRIC_SCALE=10 multiplies the truth's joint-frame and zero-offset magnitudes (a 3 mm arm instead of 0.4 mm).
+# The 7-joint tracker case in simulation: paper_iiwa's arm and tracker (reflector on the flange axis, position only),
 # one campaign of a 216-point grid (144 train, 72 validation, by a fixed shuffle) and 20 uniform test points.
 set -eu
 B=$1; OUT=$2; shift 2
 mkdir -p $OUT
 for seed in "$@"; do
   S=$OUT/s$seed; mkdir -p $S
-  python3 - "$seed" > $S/scenario.toml <<'PY'
+  python3 - "$seed" "${GEOMETRIC_SCALE:-1}" > $S/scenario.toml <<'PY'
 import sys
-seed = sys.argv[1]
+seed, k = sys.argv[1], float(sys.argv[2])
 t = open("scenarios/paper_iiwa.toml").read()
 t = t.split("[evaluation]")[0]
 t = t.replace("seed = 2019", f"seed = {seed}", 1)
+if k != 1:
+    for key, value in [("frame_translation_m", "2e-4"), ("frame_rotation_rad", "5e-4"), ("joint_zero_rad", "7e-4")]:
+        assert f"{key} = {value}" in t, key
+        t = t.replace(f"{key} = {value}", f"{key} = {float(value) * k:e}", 1)
 head, region = t.split("[[regions]]", 1)
 grid = region.replace('name = "paper"', 'name = "grid"').replace("points = 2335", "points = 216").replace('layout = "uniform"', 'layout = "grid"')
 test = region.replace('name = "paper"', 'name = "test"').replace("points = 2335", "points = 20")
