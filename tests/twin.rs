@@ -181,6 +181,34 @@ fn the_twin_finds_the_magnitudes_of_what_no_method_models() {
     let twin = Scenario::load(dir.join("twin.toml")).unwrap();
     assert!(twin.world.truth.geometry.is_some() && twin.study.is_some());
     assert_eq!(b.pilot.len(), 240);
+    // The compliances' check on the twin's replays: every compliance the pilot identifies (a poorly determined
+    // one is held undetermined in some refits).
+    let checked: Vec<u64> = b
+        .outcome
+        .compliance
+        .iter()
+        .map(|c| c.joint as u64)
+        .collect();
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("twin.json")).unwrap()).unwrap();
+    let identified: Vec<u64> = json["identified"]["compliance"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["std"].is_f64())
+        .map(|c| c["joint"].as_u64().unwrap())
+        .collect();
+    assert!(
+        !checked.is_empty() && checked == identified,
+        "{checked:?} {identified:?}"
+    );
+    for c in &b.outcome.compliance {
+        assert!(c.error_rms.is_finite() && c.error_rms > 0.0, "{c:?}");
+        assert!(
+            !c.refits.is_empty() && c.refits.len() as u64 <= twin::compliance::DRAWS,
+            "{c:?}"
+        );
+    }
     // The answer over the twin's two draws: a recommendation for the loosest target in each.
     let loosest = &b.outcome.answer[0];
     assert_eq!(loosest.points.len(), 2);
@@ -271,4 +299,71 @@ fn a_small_or_narrow_pilot_is_refused_and_nothing_is_written() {
         "{e}"
     );
     assert!(!out.exists());
+}
+
+/// Configurations drawn uniformly within the joint limits (one turn at most), with some joints confined to
+/// `[lo, hi]` (rad).
+fn draws(
+    chain: &calibench::robot::Chain,
+    n: usize,
+    confined: &[(usize, f64, f64)],
+) -> Vec<Vec<f64>> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let (lower, upper) = (chain.lower_limits(), chain.upper_limits());
+    (0..n)
+        .map(|_| {
+            (0..chain.dof())
+                .map(|j| {
+                    let (lo, hi) = confined.iter().find(|c| c.0 == j).map_or(
+                        (lower[j], upper[j].min(lower[j] + std::f64::consts::TAU)),
+                        |c| (c.1, c.2),
+                    );
+                    rng.random_range(lo..=hi)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn a_pilot_in_a_narrow_band_of_shoulder_torque_is_warned_about_and_a_broad_one_is_not() {
+    let payload = Payload {
+        mass: 1.2,
+        com: [0.0, 0.0, 0.07],
+    };
+    for (robot, shoulder, elbow) in [("robots/ur10.urdf", 1, 2), ("robots/iiwa7.urdf", 1, 3)] {
+        let chain = calibench::robot::load(root().join(robot), None).unwrap();
+        let dh = DhChain::from_chain(&chain).unwrap();
+        let name = &chain.joint_names()[shoulder];
+        let coverage =
+            |q: &[Vec<f64>]| twin::coverage::torque_coverage(&chain, &dh, payload, q, 1).unwrap();
+
+        // Every joint over its range: the pilot sees (nearly) all the torques the arm can produce.
+        let broad = coverage(&draws(&chain, 300, &[]));
+        eprintln!("{robot} broad: {broad:?}");
+        assert!(
+            twin::coverage::warning(&broad).is_none(),
+            "{robot}: {broad:?}"
+        );
+        assert!(
+            broad[0].covered.is_none(),
+            "{robot}: the first axis is vertical, gravity does not load it"
+        );
+
+        // The shoulder and the elbow held within 15° (a pilot in one corner of the workspace): the
+        // shoulder's torque stays in a band, and the warning names it with its span.
+        let (a, b) = (0.3_f64, 0.3 + 15f64.to_radians());
+        let narrow = coverage(&draws(&chain, 300, &[(shoulder, a, b), (elbow, a, b)]));
+        eprintln!("{robot} narrow: {narrow:?}");
+        assert!(narrow[shoulder].narrow(), "{robot}: {:?}", narrow[shoulder]);
+        let w = twin::coverage::warning(&narrow).unwrap();
+        assert!(
+            w.contains(name.as_str()) && w.contains("extrapolated"),
+            "{w}"
+        );
+        // Both computations of the torque agree where they overlap: the pilot's band lies within the range's.
+        assert!(narrow[shoulder].pilot[0] >= narrow[shoulder].reachable[0]);
+        assert!(narrow[shoulder].pilot[1] <= narrow[shoulder].reachable[1]);
+    }
 }

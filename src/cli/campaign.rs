@@ -147,6 +147,9 @@ pub fn run(args: &Args) -> Result<()> {
             answer_draws: a.answer_draws,
             out: a.out.clone(),
         })?;
+        if let Some(w) = done.warning() {
+            eprintln!("warning: {w}");
+        }
         print!("{}", done.text());
         return Ok(());
     }

@@ -4,9 +4,14 @@
 //! Steps, each returning what the next takes: read and check the pilot ([`pilot`]); identify the arm — its
 //! geometry and joint compliances by the elastic fit, carried over to the truth's joint frames
 //! (`calib::kinematic::geometry`); measure the pilot's own statistics; fit the magnitudes of what no method models to them
-//! ([`magnitudes`]); write `twin.toml` ([`scenario`]), `twin.json` and `twin.md` ([`report`]).
+//! ([`magnitudes`]); say which gravity torques the pilot covers against what each joint's range can produce
+//! ([`coverage`]: a compliance is extrapolated outside the pilot's band, and a narrow band is warned about) and
+//! how far the fit's compliances stray on the twin's own replays of the pilot ([`compliance`]); write
+//! `twin.toml` ([`scenario`]), `twin.json` and `twin.md` ([`report`]).
 
 pub mod answer;
+pub mod compliance;
+pub mod coverage;
 pub mod magnitudes;
 pub mod pilot;
 pub mod report;
@@ -86,6 +91,10 @@ pub struct TwinOutcome {
     pub statistics: Statistics,
     /// The twin's answer over its draws (empty without `answer_draws`).
     pub answer: Vec<answer::RangeRow>,
+    /// Per joint, the gravity torques the pilot loaded it with against those its range can produce.
+    pub coverage: Vec<coverage::TorqueSpan>,
+    /// Per identified compliance, the elastic fit's error on the twin's replays of the pilot.
+    pub compliance: Vec<compliance::ComplianceCheck>,
     pub out: PathBuf,
 }
 
@@ -93,6 +102,11 @@ impl TwinOutcome {
     /// What `campaign twin` prints.
     pub fn text(&self) -> String {
         report::console(self)
+    }
+
+    /// The line `campaign twin` warns with when the pilot's torque band is narrow on some joint.
+    pub fn warning(&self) -> Option<String> {
+        coverage::warning(&self.coverage)
     }
 }
 
@@ -115,6 +129,7 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
         ..FitContext::new(&chain, &dh)
     };
     let identified = identify(&pilot, &ctx, &chain, options.seed)?;
+    let coverage = coverage::torque_coverage(&chain, &dh, options.payload, &pilot.q, options.seed)?;
     let real = pilot::held_out(&pilot, &ctx, &MethodKind::ALL, options.seed);
     let targets = Targets {
         elastic_mm: elastic_mean(&real).ok_or_else(|| Error::Data {
@@ -128,10 +143,13 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
     let mut values = initial_values(options, &pilot, &identified, &real)?;
     values.thermal = temperature.map(|t| thermal::warm_up(&t, pilot.time.as_deref()));
     fit_magnitudes(&mut values, &pilot, &ctx, &targets, options.seed)?;
+    let compliance = compliance::check(&values, &identified, &pilot, &ctx, options.seed)?;
     let statistics = statistics(&values, &pilot, &ctx, real, targets.repeats, options.seed)?;
     let answer = answer::answer_range(&values, options.answer_draws)?;
     let outcome = TwinOutcome {
         answer,
+        coverage,
+        compliance,
         points: pilot.len(),
         identified_parameters: identified.model.kept.len(),
         values,

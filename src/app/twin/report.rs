@@ -48,7 +48,8 @@ fn json_file(
         .map(|(j, (c, k))| match c {
             Some((c, s)) => json!({
                 "joint": j + 1, "compliance_rad_per_nm": c, "std": s, "stiffness_nm_per_rad": k,
-                "stiffness_std": s / (c * c), "source": "identified (elastic fit on the pilot)",
+                "stiffness_std": s / (c * c),
+                "source": "identified (elastic fit on the pilot); its error on the twin's replays in compliance_check",
             }),
             None => json!({
                 "joint": j + 1, "stiffness_nm_per_rad": k,
@@ -83,6 +84,15 @@ fn json_file(
             "mounting_m": registration.frame.mounting,
             "geometry": identified.geometry,
             "geometry_match_m": identified.geometry_match_m,
+        },
+        "torque_coverage": {
+            "joints": outcome.coverage,
+            "narrow_below": super::coverage::NARROW_FRACTION,
+            "warning": outcome.warning(),
+        },
+        "compliance_check": {
+            "draws": super::compliance::DRAWS,
+            "joints": outcome.compliance,
         },
         "magnitudes": outcome.values.magnitudes,
         "answer": outcome.answer,
@@ -150,6 +160,7 @@ fn markdown(outcome: &TwinOutcome, options: &TwinOptions) -> String {
             twin_cell(&s.twin_repeats.iter().map(|d| d * 1e3).collect::<Vec<_>>())
         );
     }
+    coverage_md(outcome, &mut out);
     answer_md(outcome, &mut out);
     out += "\n## Magnitudes\n\n| key | value | std | source |\n|---|---|---|---|\n";
     for m in &outcome.values.magnitudes {
@@ -164,6 +175,48 @@ fn markdown(outcome: &TwinOutcome, options: &TwinOptions) -> String {
         );
     }
     out
+}
+
+/// The gravity torques the pilot covers, and the compliances as the twin takes them.
+fn coverage_md(outcome: &TwinOutcome, out: &mut String) {
+    out.push_str(
+        "\n## Gravity torque the pilot covers\n\nPer joint, the gravity torque (Nm) over the pilot and over \
+         configurations drawn within the joint limits; a compliance is told from the change of the deflection \
+         with the torque, so outside the pilot's band it is extrapolated.\n\n\
+         | joint | pilot | joint's range | covered |\n|---|---|---|---|\n",
+    );
+    for s in &outcome.coverage {
+        let covered = s.covered.map_or("not loaded".into(), |c| {
+            format!(
+                "{:.0} %{}",
+                100.0 * c,
+                if s.narrow() { " (narrow)" } else { "" }
+            )
+        });
+        let _ = writeln!(
+            out,
+            "| {} | {:.1} … {:.1} | {:.1} … {:.1} | {covered} |",
+            s.joint, s.pilot[0], s.pilot[1], s.reachable[0], s.reachable[1]
+        );
+    }
+    if let Some(w) = outcome.warning() {
+        let _ = writeln!(out, "\n**Warning:** {w}.");
+    }
+    let _ = writeln!(
+        out,
+        "\nCompliances (rad/Nm): the elastic fit's on the pilot with its standard deviation, and how far the same \
+         fit lands from the twin's own compliance on the pilot replayed through the twin ({} draws, RMS): where \
+         that error exceeds the standard deviation, what no method models leans on the compliance within the \
+         pilot's band.\n\n| joint | fitted ± std | twin | error on the twin's replays |\n|---|---|---|---|",
+        super::compliance::DRAWS
+    );
+    for c in &outcome.compliance {
+        let _ = writeln!(
+            out,
+            "| {} | {:.2e} ± {:.1e} | {:.2e} | {:.1e} |",
+            c.joint, c.fitted, c.fitted_std, c.twin, c.error_rms
+        );
+    }
 }
 
 /// The twin's answer over its draws.
