@@ -295,7 +295,7 @@ fn next_frame(
 ) -> (FrameAxes, Option<DhRow>) {
     let cross = prev.z.cross(&v);
     let sin = cross.norm();
-    if sin >= PARALLEL_SIN && sin < NEAR_PARALLEL_SIN {
+    if (PARALLEL_SIN..NEAR_PARALLEL_SIN).contains(&sin) {
         let (frame, row) = hayati_frame(prev, p, v, prismatic);
         return (frame, Some(row));
     }
