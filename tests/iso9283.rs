@@ -256,6 +256,15 @@ fn calibration_improves_the_pose_accuracy_of_the_paper_iiwa() {
     assert!(
         text.contains("ISO 9283 pose accuracy AP and repeatability RP (mm): cube of edge 240.0 mm")
     );
+    // summary.md has the table, its mean AP the csv's (a scenario without a study gets a summary of it alone).
+    let summary = std::fs::read_to_string(out.path().join("iso/summary.md")).unwrap();
+    let row = summary
+        .lines()
+        .find(|l| l.starts_with("| nominal |"))
+        .unwrap_or_else(|| panic!("no nominal row:\n{summary}"));
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(cells[7], format!("{nominal:.4}"), "{row}");
+    assert_eq!(cells[8], format!("{hi:.4}"), "{row}");
 }
 
 #[test]

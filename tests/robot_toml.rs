@@ -126,6 +126,52 @@ fn a_modified_dh_table_of_the_same_arm_gives_the_same_flange() {
     assert!((in_degrees.joints[0].upper - 2.0 * PI).abs() < 1e-12);
 }
 
+/// A table with Hayati rows (`beta` on rows 2 and 3, as `calibrate export` writes a calibrated UR arm) is the
+/// product Π Rz(q) Tz(d) Tx(a) Rx(α) Ry(β), and calibench's own DH form of the loaded chain is that table again.
+/// `beta` in a modified-DH table is refused on one line.
+#[test]
+fn a_table_with_hayati_rows_is_the_product_with_ry_beta_and_reads_back() {
+    let beta = [0.0, 2e-4, -1.5e-4, 0.0, 0.0, 0.0];
+    let text = UR5_TOML
+        .replacen("d = 0.0\n", "d = 0.0\nbeta = 2e-4\n", 1)
+        .replacen(
+            "a = -0.39225\nalpha = 0.0\nd = 0.0\n",
+            "a = -0.39225\nalpha = 0.0\nd = 0.0\nbeta = -1.5e-4\n",
+            1,
+        );
+    assert_eq!(text.matches("beta = ").count(), 2, "{text}");
+    let chain = robot::description::from_toml(&text, "hayati.toml").unwrap();
+    for q in random_configurations(&chain, 20, 9) {
+        let mut t = Isometry3::identity();
+        for (((a, alpha, d), b), qi) in UR5_DH.iter().zip(beta).zip(&q) {
+            t = t
+                * Isometry3::rotation(Vector3::z() * *qi)
+                * Isometry3::translation(0.0, 0.0, *d)
+                * Isometry3::translation(*a, 0.0, 0.0)
+                * Isometry3::rotation(Vector3::x() * *alpha)
+                * Isometry3::rotation(Vector3::y() * b);
+        }
+        let (m, rad) = difference(&t, &flange_pose(&chain, &q));
+        assert!(m <= 1e-12 && rad <= 1e-12, "{m:e} m, {rad:e} rad");
+    }
+    let dh = calibench::robot::dh::DhChain::from_chain(&chain).unwrap();
+    for (i, (r, (a, alpha, d))) in dh.rows.iter().zip(UR5_DH).enumerate() {
+        let diff = [
+            r.a - a,
+            r.alpha - alpha,
+            r.d - d,
+            r.beta - beta[i],
+            r.theta_offset,
+        ];
+        assert!(diff.iter().all(|v| v.abs() < 1e-12), "row {i}: {r:?}");
+    }
+    let modified = modified_ur5().replacen("d = 0.0\n", "d = 0.0\nbeta = 1e-4\n", 1);
+    let e = robot::description::from_toml(&modified, "modified.toml")
+        .expect_err("beta in modified DH")
+        .line();
+    assert!(e.contains("modified.toml") && e.contains("beta"), "{e}");
+}
+
 #[test]
 fn centres_of_mass_sit_where_the_datasheet_puts_them_in_dh_frame_i() {
     let chain = robot::load(repo("robots/ur5.toml"), None).unwrap();

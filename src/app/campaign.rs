@@ -146,6 +146,9 @@ pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<Campaign
     if let Some((study, _)) = &study {
         files.extend(report::study_files(study, &world.nominal)?);
     }
+    if let Some(iso) = &iso9283 {
+        with_iso9283(&mut files, &scenario.world.name, iso);
+    }
     output::write_dir(&out, &files, OUTPUTS)?;
     Ok(CampaignRun {
         scenario,
@@ -160,6 +163,18 @@ pub fn run(mut scenario: Scenario, options: &CampaignOptions) -> Result<Campaign
         motion,
         out,
     })
+}
+
+/// `summary.md` with the ISO 9283 section at its end; a campaign without a study gets one holding only that.
+fn with_iso9283(files: &mut Vec<(String, Vec<u8>)>, name: &str, iso: &iso9283::Iso9283) {
+    let section = report::summary::iso9283_md(iso);
+    match files.iter_mut().find(|(f, _)| f == "summary.md") {
+        Some((_, bytes)) => bytes.extend(format!("\n{section}").into_bytes()),
+        None => files.push((
+            "summary.md".into(),
+            format!("# Campaign `{name}`\n\n{section}").into_bytes(),
+        )),
+    }
 }
 
 /// The scenario's campaign, or with `--replay` the real campaign's configurations measured in the scenario's

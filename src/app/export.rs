@@ -239,6 +239,7 @@ fn same_robot(chain: &Chain, model: &KinematicModel, path: &Path) -> Result<()> 
             a.d - b.d,
             a.a - b.a,
             a.alpha - b.alpha,
+            a.beta - b.beta,
         ];
         if diff.iter().any(|v| v.abs() > SAME_ROBOT) || a.prismatic != b.prismatic {
             return Err(refuse(format!("DH row {} differs", i + 1)));

@@ -9,7 +9,9 @@
 //! - **Standard DH** (`convention = "dh"`): `T = Π Rz(θᵢ + offsetᵢ) Tz(dᵢ) Tx(aᵢ) Rx(αᵢ) · tool`. Link i's frame is
 //!   DH frame i−1 turned by θᵢ + offsetᵢ and moved dᵢ along the joint axis (as `robots/ur10.urdf` draws it); DH
 //!   frame i is link i's frame moved by `Tx(aᵢ) Rx(αᵢ)`, and a row's `com` and `inertia` are given in DH frame i,
-//!   as manufacturers publish them.
+//!   as manufacturers publish them. A row may add Hayati's `beta`, a turn about the new y axis after α
+//!   (`… Rx(αᵢ) Ry(βᵢ)`), which holds nearly parallel axes exactly ([`super::dh`]); `calibrate export` writes it
+//!   for a calibrated UR arm.
 //! - **Modified DH** (Craig, `convention = "modified-dh"`): `T = Π Rx(αᵢ₋₁) Tx(aᵢ₋₁) Rz(θᵢ + offsetᵢ) Tz(dᵢ) · tool`;
 //!   row i holds `a` = aᵢ₋₁ and `alpha` = αᵢ₋₁ of the link before it. Link i's frame is DH frame i, in which the
 //!   row's `com` and `inertia` are given.
@@ -125,8 +127,7 @@ pub fn to_toml(chain: &Chain, compliance: Option<&[f64]>, header: &str) -> Resul
     }
     let dh = DhChain::from_chain(chain).map_err(|e| {
         Error::Invalid(format!(
-            "no exact DH table: {}. Calibration makes nominally parallel joint axes (UR's 2, 3, 4) slightly \
-             skew, whose common normal standard DH needs lies metres to kilometres away; export with --format urdf",
+            "no exact DH table: {}; export with --format urdf",
             e.detail()
         ))
     })?;
@@ -163,6 +164,7 @@ pub fn to_toml(chain: &Chain, compliance: Option<&[f64]>, header: &str) -> Resul
                 alpha: r.alpha,
                 d: r.d,
                 theta_offset: r.theta_offset,
+                beta: (r.beta != 0.0).then_some(r.beta),
                 lower: if j.lower.is_finite() { j.lower } else { -turn },
                 upper: if j.upper.is_finite() { j.upper } else { turn },
                 velocity: j.velocity.is_finite().then_some(j.velocity),
@@ -247,6 +249,9 @@ struct JointRow {
     /// Added to the joint angle: the link turns by q + theta_offset.
     #[serde(default)]
     theta_offset: f64,
+    /// Hayati's turn about the new y axis after `alpha` (standard DH only): absent for a standard row.
+    #[serde(default)]
+    beta: Option<f64>,
     /// Joint limits (the table's angle unit).
     lower: f64,
     upper: f64,
@@ -338,6 +343,15 @@ fn rx(alpha: f64) -> Isometry3<f64> {
     Isometry3::rotation(Vector3::x() * alpha)
 }
 
+/// `frame · Ry(beta)`; a standard row (β = 0) is left untouched to the bit.
+fn hayati(frame: Isometry3<f64>, beta: f64) -> Isometry3<f64> {
+    if beta == 0.0 {
+        frame
+    } else {
+        frame * Isometry3::rotation(Vector3::y() * beta)
+    }
+}
+
 fn tx(a: f64) -> Isometry3<f64> {
     Isometry3::translation(a, 0.0, 0.0)
 }
@@ -376,6 +390,15 @@ impl Description {
             length(&f("d"), r.d)?;
             for (k, v) in [("alpha", r.alpha), ("theta_offset", r.theta_offset)] {
                 bounded(&f(k), v, 1e3, "angle")?;
+            }
+            if let Some(beta) = r.beta {
+                bounded(&f("beta"), beta, 1e3, "angle")?;
+                if self.convention != DhConvention::Dh {
+                    return Err(invalid(
+                        f("beta"),
+                        "Hayati's beta is a standard-DH field (convention = \"dh\")",
+                    ));
+                }
             }
             for (k, v) in [("lower", r.lower), ("upper", r.upper)] {
                 bounded(&f(k), v, 1e4, "joint limit")?;
@@ -430,9 +453,13 @@ impl Description {
         let mut before = self.base.pose(unit);
         for r in &self.joints {
             let (alpha, offset) = (r.alpha * unit, r.theta_offset * unit);
+            let beta = r.beta.unwrap_or(0.0) * unit;
             // Joint frame (= link frame at q = 0) in the previous link's frame, and DH frame i in the link frame.
             let (origin, dh_frame) = match self.convention {
-                DhConvention::Dh => (before * tz(r.d) * rz(offset), tx(r.a) * rx(alpha)),
+                DhConvention::Dh => (
+                    before * tz(r.d) * rz(offset),
+                    hayati(tx(r.a) * rx(alpha), beta),
+                ),
                 DhConvention::ModifiedDh => (
                     before * rx(alpha) * tx(r.a) * tz(r.d) * rz(offset),
                     Isometry3::identity(),

@@ -13,8 +13,15 @@
 //! - frame 0 sits as close to the chain's base frame as joint 1's axis allows, frame n on the last axis
 //!   as close to the flange as possible, so `base` and `tool` are identity for a URDF drawn in DH frames.
 //!
-//! Nearly parallel (but not parallel) consecutive axes are described exactly, with a common normal far
-//! away and a large `d`: that is DH's known ill-conditioning, which the paper's §1 mentions, not a bug.
+//! Nearly parallel (but not parallel) consecutive axes — a UR arm's 2, 3 and 4 once a calibration has tilted
+//! them — have a common normal metres to kilometres away, where standard DH needs a huge `d` (its known
+//! ill-conditioning, which the paper's §1 mentions) and rounding loses the model. Those rows are Hayati's
+//! (Hayati & Mirmirani 1985, "Improving the absolute positioning accuracy of robot manipulators", J. Robotic
+//! Systems 2(4)): `A_i = Rz(θ_i) Tx(a_i) Rx(α_i) Ry(β_i)` with `d_i = 0`, frame i's origin where the next axis
+//! crosses frame i−1's x-y plane. For exactly parallel axes that is the standard row with `d = 0` and β = 0,
+//! so nominal tables do not change. The generalized error frames (`calib::error_model`) sit after A_i as
+//! before: a β row only places frame i, and frame i's error about y is the calibration literature's β error
+//! (which replaces the unidentifiable d error of a near-parallel row).
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -31,7 +38,15 @@ pub struct DhRow {
     pub d: f64,
     pub a: f64,
     pub alpha: f64,
+    /// Hayati's rotation about the new y axis, after `alpha` (0 for a standard row; see the module notes).
+    /// Left out of files when 0, so tables without it read and write as before.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub beta: f64,
     pub prismatic: bool,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// A chain in DH form: `base · A_1(q_1) ⋯ A_n(q_n) · tool` is the flange pose.
@@ -48,6 +63,10 @@ pub struct DhChain {
 /// rotations is ~1e-16; anything above this threshold is a real (if tiny) skew that must be kept for
 /// the DH model to be exact.
 const PARALLEL_SIN: f64 = 1e-10;
+/// From this sine of the angle between consecutive axes (0.57°) up, a standard row is used; below it (and
+/// above [`PARALLEL_SIN`]) a Hayati row, whose frame stays near the arm where the common normal would not.
+/// Nominal arms have exactly parallel or clearly skew axes; calibration tilts parallel ones by ~1e-4 rad.
+const NEAR_PARALLEL_SIN: f64 = 1e-2;
 /// Below this distance (m) two parallel axes are one line and the common normal's direction is free.
 const COINCIDENT: f64 = 1e-12;
 /// |cos θ| below which the two x-axis signs give θ = ±π/2 equally far from zero.
@@ -113,30 +132,13 @@ impl DhChain {
             x: perpendicular(&u, &chain.base.rotation),
             z: u,
         });
-        for &(p, v) in &lines[1..] {
+        // Per joint after the first: the Hayati row that reaches its frame, where one does.
+        let mut hayati: Vec<Option<DhRow>> = Vec::with_capacity(n);
+        for (&(p, v), joint) in lines[1..].iter().zip(&chain.joints) {
             let prev = axes.last().expect("frame 0 pushed above");
-            let cross = prev.z.cross(&v);
-            let sin = cross.norm();
-            let (origin, normal) = if sin < PARALLEL_SIN {
-                let origin = p + v * (prev.origin - p).dot(&v);
-                let w = origin - prev.origin;
-                let normal = if w.norm() > COINCIDENT {
-                    w / w.norm()
-                } else {
-                    // One line: any normal will do; the previous x keeps θ = 0.
-                    let r = prev.x - v * prev.x.dot(&v);
-                    r / r.norm()
-                };
-                (origin, normal)
-            } else {
-                // Foot on the new axis of the common normal of the two lines.
-                let r = prev.origin - p;
-                let (b, dz, ev) = (prev.z.dot(&v), prev.z.dot(&r), v.dot(&r));
-                let t = (ev - b * dz) / (sin * sin);
-                (p + v * t, cross / sin)
-            };
-            let x = orient(normal, &prev.x, &prev.z);
-            axes.push(FrameAxes { origin, x, z: v });
+            let (frame, row) = next_frame(prev, p, v, joint.kind == JointKind::Prismatic);
+            axes.push(frame);
+            hayati.push(row);
         }
         let (p, u) = lines[n - 1];
         let flange_origin = Point3::from(fk.flange.translation.vector);
@@ -149,7 +151,11 @@ impl DhChain {
         let rows = axes
             .windows(2)
             .zip(&chain.joints)
-            .map(|(w, joint)| {
+            .enumerate()
+            .map(|(i, (w, joint))| {
+                if let Some(row) = hayati.get(i).cloned().flatten() {
+                    return row;
+                }
                 let (f, g) = (&w[0], &w[1]);
                 let delta = g.origin - f.origin;
                 DhRow {
@@ -157,6 +163,7 @@ impl DhChain {
                     d: delta.dot(&f.z),
                     a: delta.dot(&g.x),
                     alpha: angle(f.z.cross(&g.z).dot(&g.x), f.z.dot(&g.z)),
+                    beta: 0.0,
                     prismatic: joint.kind == JointKind::Prismatic,
                 }
             })
@@ -186,12 +193,24 @@ impl DhChain {
             plausible::length(&field("d"), r.d)?;
             plausible::length(&field("a"), r.a)?;
             plausible::angle(&field("alpha"), r.alpha)?;
+            plausible::angle(&field("beta"), r.beta)?;
         }
         Ok(())
     }
 
-    /// A_i(q_i) = Rz(q_i + theta_offset) Tz(d) Tx(a) Rx(alpha) (prismatic: d + q_i). Paper eq. 1.
+    /// A_i(q_i) = Rz(q_i + theta_offset) Tz(d) Tx(a) Rx(alpha) (prismatic: d + q_i), paper eq. 1; a Hayati row
+    /// turns on by Ry(beta).
     pub fn link_transform(&self, i: usize, qi: f64) -> Isometry3<f64> {
+        let a = self.standard_transform(i, qi);
+        let beta = self.rows[i].beta;
+        if beta == 0.0 {
+            a
+        } else {
+            a * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), beta)
+        }
+    }
+
+    fn standard_transform(&self, i: usize, qi: f64) -> Isometry3<f64> {
         let r = &self.rows[i];
         let (theta, d) = if r.prismatic {
             (r.theta_offset, r.d + qi)
@@ -263,6 +282,79 @@ impl DhChain {
         }
         Ok(())
     }
+}
+
+/// The DH frame on the line (`p`, `v`) of the next joint axis after `prev`, and the row that reaches it when
+/// that is a Hayati row (the axes nearly parallel, see the module notes); `None` for a standard row, which the
+/// caller reads off the two frames.
+fn next_frame(
+    prev: &FrameAxes,
+    p: Point3<f64>,
+    v: Vector3<f64>,
+    prismatic: bool,
+) -> (FrameAxes, Option<DhRow>) {
+    let cross = prev.z.cross(&v);
+    let sin = cross.norm();
+    if (PARALLEL_SIN..NEAR_PARALLEL_SIN).contains(&sin) {
+        let (frame, row) = hayati_frame(prev, p, v, prismatic);
+        return (frame, Some(row));
+    }
+    let (origin, normal) = if sin < PARALLEL_SIN {
+        let origin = p + v * (prev.origin - p).dot(&v);
+        let w = origin - prev.origin;
+        let normal = if w.norm() > COINCIDENT {
+            w / w.norm()
+        } else {
+            // One line: any normal will do; the previous x keeps θ = 0.
+            let r = prev.x - v * prev.x.dot(&v);
+            r / r.norm()
+        };
+        (origin, normal)
+    } else {
+        // Foot on the new axis of the common normal of the two lines.
+        let r = prev.origin - p;
+        let (b, dz, ev) = (prev.z.dot(&v), prev.z.dot(&r), v.dot(&r));
+        let t = (ev - b * dz) / (sin * sin);
+        (p + v * t, cross / sin)
+    };
+    let x = orient(normal, &prev.x, &prev.z);
+    (FrameAxes { origin, x, z: v }, None)
+}
+
+/// Hayati's frame on the line (`p`, `v`), nearly parallel to `prev`'s z: its origin where the line crosses
+/// `prev`'s x-y plane (d = 0), reached by Rz(θ) Tx(a) along the common direction (θ within ±π/2 as for a
+/// standard row), then turned by Rx(α) Ry(β) so that z lies along `v`.
+fn hayati_frame(
+    prev: &FrameAxes,
+    p: Point3<f64>,
+    v: Vector3<f64>,
+    prismatic: bool,
+) -> (FrameAxes, DhRow) {
+    let origin = p + v * ((prev.origin - p).dot(&prev.z) / v.dot(&prev.z));
+    let w = origin - prev.origin;
+    let normal = if w.norm() > COINCIDENT {
+        w / w.norm()
+    } else {
+        prev.x
+    };
+    let x1 = orient(normal, &prev.x, &prev.z);
+    let y1 = prev.z.cross(&x1);
+    // v = Rx(α) Ry(β) ẑ = (sin β, −sin α cos β, cos α cos β) in the turned frame (x1, y1, z).
+    let (vx, vy, vz) = (v.dot(&x1), v.dot(&y1), v.dot(&prev.z));
+    let beta = vx.atan2(vy.hypot(vz));
+    let alpha = angle(-vy, vz);
+    let (sa, ca) = alpha.sin_cos();
+    let (sb, cb) = beta.sin_cos();
+    let x = x1 * cb + y1 * (sa * sb) - prev.z * (ca * sb);
+    let row = DhRow {
+        theta_offset: angle(prev.x.cross(&x1).dot(&prev.z), prev.x.dot(&x1)),
+        d: 0.0,
+        a: w.dot(&x1),
+        alpha,
+        beta,
+        prismatic,
+    };
+    (FrameAxes { origin, x, z: v }, row)
 }
 
 /// Unit vector perpendicular to `z` taken from the frame's x axis, or its y axis when x lies along `z`,
@@ -460,6 +552,7 @@ mod tests {
                 d: 0.2,
                 a: -0.5,
                 alpha: 0.7,
+                beta: 0.0,
                 prismatic: false,
             }],
             tool: Isometry3::identity(),
@@ -490,6 +583,46 @@ mod tests {
                 .max()
                 < 1e-15
         );
+    }
+
+    /// A Hayati row is the standard transform followed by Ry(β), as a matrix product.
+    #[test]
+    fn dh_link_transform_of_a_hayati_row_ends_with_ry_beta() {
+        let row = |beta| DhRow {
+            theta_offset: -0.2,
+            d: 0.0,
+            a: 0.4,
+            alpha: 0.01,
+            beta,
+            prismatic: false,
+        };
+        let one = |r: DhRow| DhChain {
+            base: Isometry3::identity(),
+            rows: vec![r],
+            tool: Isometry3::identity(),
+        };
+        let beta: f64 = 3e-4;
+        let ry = nalgebra::Matrix4::new(
+            beta.cos(),
+            0.0,
+            beta.sin(),
+            0.0, //
+            0.0,
+            1.0,
+            0.0,
+            0.0, //
+            -beta.sin(),
+            0.0,
+            beta.cos(),
+            0.0, //
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let want = one(row(0.0)).link_transform(0, 0.9).to_homogeneous() * ry;
+        let got = one(row(beta)).link_transform(0, 0.9).to_homogeneous();
+        assert!((got - want).abs().max() < 1e-15);
     }
 
     #[test]
@@ -568,6 +701,42 @@ mod tests {
             "base should follow the chain's base"
         );
         assert_matches_chain(&moved, &dh_moved, 12, 100);
+    }
+
+    /// ur_description's UR10 after a calibration: joint origins turned by 1e-4 rad, so that axes 2, 3 and 4
+    /// are no longer parallel. Standard DH would put frames 2 and 3 on common normals kilometres away; the
+    /// derived table has Hayati rows there (d = 0, β ≠ 0), keeps the frames on the arm and matches the chain.
+    #[test]
+    fn dh_of_a_skewed_ur10_has_hayati_rows_and_matches_its_chain() {
+        let text = UR10_URDF
+            .replace(
+                "xyz=\"0 -0.1719 0.612\" rpy=\"0 0 0\"",
+                "xyz=\"0 -0.1719 0.612\" rpy=\"1e-4 0 -2e-4\"",
+            )
+            .replace(
+                "xyz=\"0 0 0.5723\" rpy=\"0 1.5707963267948966 0\"",
+                "xyz=\"0 0 0.5723\" rpy=\"-1.5e-4 1.5707963267948966 0.5e-4\"",
+            );
+        assert_ne!(text, UR10_URDF);
+        let chain = urdf::load_str(&text, "ur10 skewed", None).unwrap();
+        let dh = DhChain::from_chain(&chain).unwrap();
+        let hayati: Vec<usize> = (0..6).filter(|&i| dh.rows[i].beta != 0.0).collect();
+        assert_eq!(hayati, [1, 2], "rows 2 and 3 join nearly parallel axes");
+        for (i, r) in dh.rows.iter().enumerate() {
+            assert!(r.d.abs() < 0.2 && r.a.abs() < 0.7, "row {i}: {r:?}");
+            assert!(r.beta.abs() < 1e-3, "row {i}: beta {}", r.beta);
+        }
+        assert_eq!((dh.rows[1].d, dh.rows[2].d), (0.0, 0.0));
+        // Unskewed, the same rows are standard ones: the nominal table does not change.
+        let nominal =
+            DhChain::from_chain(&urdf::load_str(UR10_URDF, "ur10", None).unwrap()).unwrap();
+        assert!(nominal.rows.iter().all(|r| r.beta == 0.0));
+        assert_matches_chain(&chain, &dh, 13, 300);
+        // Serialized without `beta` where it is 0, with it where not.
+        let json = serde_json::to_string(&dh).unwrap();
+        assert_eq!(json.matches("\"beta\"").count(), 2, "{json}");
+        let back: DhChain = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.rows[1].beta, dh.rows[1].beta);
     }
 
     /// Revolute, a prismatic joint on the same line (coincident axes), a skew revolute, a prismatic joint
