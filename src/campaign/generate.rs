@@ -101,8 +101,9 @@ impl Generator<'_> {
                         region.layout.name()
                     )));
                 }
+                // Each selector's choice is independent of the others': in parallel, in order.
                 return Ok(selectors
-                    .iter()
+                    .par_iter()
                     .map(|selector| {
                         let kept = self.select(region, *selector, &accepted, want)?;
                         let mut counts = last.clone();

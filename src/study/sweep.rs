@@ -168,23 +168,29 @@ pub fn run_part(
         progress: &counter,
         timings: options.timings,
     };
-    let outputs: Vec<(Job, JobOutput)> =
-        jobs.par_iter().map(|&job| (job, shared.run(job))).collect();
-    counter.finish();
-    let (runs, detail) = in_config_order(outputs);
-    let trajectory = match (&config.trajectory, shard.index) {
-        (Some(t), 0) => super::trajectory::run(
-            &shared.measure,
-            config,
-            t,
-            &shared.ctx,
-            &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
-        )?,
-        _ => super::trajectory::TrajectoryOutcome {
-            runs: Vec::new(),
-            detail: None,
+    // The trajectory campaigns run beside the stop-and-go ones rather than after them: neither waits on the
+    // other, and the pool stays busy through the longest job of either.
+    let (outputs, trajectory) = rayon::join(
+        || -> Vec<(Job, JobOutput)> {
+            jobs.par_iter().map(|&job| (job, shared.run(job))).collect()
         },
-    };
+        || match (&config.trajectory, shard.index) {
+            (Some(t), 0) => super::trajectory::run(
+                &shared.measure,
+                config,
+                t,
+                &shared.ctx,
+                &shared.regions.iter().map(|r| &r.truth).collect::<Vec<_>>(),
+            ),
+            _ => Ok(super::trajectory::TrajectoryOutcome {
+                runs: Vec::new(),
+                detail: None,
+            }),
+        },
+    );
+    counter.finish();
+    let trajectory = trajectory?;
+    let (runs, detail) = in_config_order(outputs);
     Ok(StudyPart {
         shard,
         campaigns: held,

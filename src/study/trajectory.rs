@@ -20,10 +20,10 @@ use crate::calib::clock;
 use crate::calib::method::{FitContext, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
 use crate::calib::registry::MethodKind;
-use crate::campaign::LayoutKind;
 use crate::campaign::config::TrajectoryConfig;
 use crate::campaign::ground_truth::TruePoint;
 use crate::campaign::trajectory::{self, TrajectoryCampaign};
+use crate::campaign::{Campaign, LayoutKind};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::GroundTruth;
@@ -172,7 +172,8 @@ pub struct TrajectoryOutcome {
     pub detail: Option<TrajectoryDetail>,
 }
 
-/// Every trajectory run of the study, in the order (region, size, seed, speed, method), and the detail.
+/// Every trajectory run of the study, in the order (region, size, seed, speed, method), and the detail. The
+/// stop-and-go campaign a path passes through is generated once for all its speeds.
 pub(super) fn run(
     measure: &Measure,
     config: &StudyConfig,
@@ -182,20 +183,11 @@ pub(super) fn run(
 ) -> Result<TrajectoryOutcome> {
     let shown_n = study.sizes.iter().copied().max().unwrap_or(0);
     let shown_speed = study.speeds.iter().copied().fold(0.0, f64::max);
-    let mut jobs = Vec::new();
+    let mut targets = Vec::new();
     for r in 0..measure.regions.len() {
         for &n in &study.sizes {
             for seed in 0..study.seeds {
-                for &speed in &study.speeds {
-                    let shown = r == 0 && n == shown_n && seed == 0 && speed == shown_speed;
-                    jobs.push(PathJob {
-                        r,
-                        n,
-                        seed,
-                        speed,
-                        shown,
-                    });
-                }
+                targets.push((r, n, seed));
             }
         }
     }
@@ -206,18 +198,43 @@ pub(super) fn run(
         ctx,
         truth,
     };
-    let out: Vec<(Vec<TrajectoryRun>, Option<TrajectoryDetail>)> =
-        jobs.par_iter().map(|&job| context.run(job)).collect();
+    let out: Vec<Vec<PathOutput>> = targets
+        .par_iter()
+        .map(|&(r, n, seed)| {
+            let jobs: Vec<PathJob> = study
+                .speeds
+                .iter()
+                .map(|&speed| PathJob {
+                    r,
+                    n,
+                    seed,
+                    speed,
+                    shown: r == 0 && n == shown_n && seed == 0 && speed == shown_speed,
+                })
+                .collect();
+            let key = context.key(jobs[0]);
+            let planned = context.planned(jobs[0], key);
+            jobs.par_iter()
+                .map(|&job| match &planned {
+                    Ok(planned) => context.run(job, key, planned),
+                    Err(e) => (context.failed(job, e.detail()), None),
+                })
+                .collect()
+        })
+        .collect();
     let mut outcome = TrajectoryOutcome {
         runs: Vec::new(),
         detail: None,
     };
-    for (runs, detail) in out {
+    for (runs, detail) in out.into_iter().flatten() {
         outcome.runs.extend(runs);
         outcome.detail = outcome.detail.or(detail);
     }
     Ok(outcome)
 }
+
+/// The runs of one trajectory campaign, and its detail when it is shown.
+type PathOutput = (Vec<TrajectoryRun>, Option<TrajectoryDetail>);
 
 /// One trajectory campaign: region `r`, `n` targets, repetition `seed`, `speed`; `shown` when the recording
 /// shows it sample by sample.
@@ -248,18 +265,33 @@ struct Samples {
 }
 
 impl PathContext<'_> {
-    /// The runs of every method on `job`'s campaign (failed runs when the campaign or its clock fails), and its
-    /// detail when it is shown.
-    fn run(&self, job: PathJob) -> (Vec<TrajectoryRun>, Option<TrajectoryDetail>) {
-        let key = campaign_seed(
+    /// The seed of `job`'s stop-and-go campaign (the same for every speed).
+    fn key(&self, job: PathJob) -> u64 {
+        campaign_seed(
             self.measure.world.seed(),
             job.r as u64,
             layout_index(LayoutKind::Uniform),
             job.n as u64,
             job.seed,
-        );
+        )
+    }
+
+    /// The stop-and-go campaign of `job`'s region, size and seed on the uniform layout: the targets its path
+    /// passes through.
+    fn planned(&self, job: PathJob, key: u64) -> Result<Campaign> {
+        self.measure.campaign(
+            job.r,
+            LayoutKind::Uniform,
+            self.config.campaign_points(job.n),
+            key,
+        )
+    }
+
+    /// The runs of every method on `job`'s campaign through `planned` (failed runs when the campaign or its
+    /// clock fails), and its detail when it is shown.
+    fn run(&self, job: PathJob, key: u64, planned: &Campaign) -> PathOutput {
         let failed = |e: Error| (self.failed(job, e.detail()), None);
-        let measured = match self.measure_path(job, key) {
+        let measured = match self.measure_path(job, key, planned) {
             Ok(m) => m,
             Err(e) => return failed(e),
         };
@@ -314,18 +346,17 @@ impl PathContext<'_> {
             .collect()
     }
 
-    /// The path through the stop-and-go campaign's targets of `job`, measured on the fly.
-    fn measure_path(&self, job: PathJob, key: u64) -> Result<TrajectoryCampaign> {
-        let planned = self.measure.campaign(
-            job.r,
-            LayoutKind::Uniform,
-            self.config.campaign_points(job.n),
-            key,
-        )?;
+    /// The path through the stop-and-go campaign's targets `planned`, measured on the fly at `job`'s speed.
+    fn measure_path(
+        &self,
+        job: PathJob,
+        key: u64,
+        planned: &Campaign,
+    ) -> Result<TrajectoryCampaign> {
         let posture = self.measure.campaign.posture_rad();
         trajectory::measure(
             self.measure.world,
-            &planned,
+            planned,
             &posture,
             &self.study.config(job.speed),
             key,
@@ -369,12 +400,12 @@ impl PathContext<'_> {
             samples.data.subset(&samples.train),
             samples.data.subset(&samples.val),
         );
-        let mut detail = None;
-        let runs = self
+        let fitted: Vec<(TrajectoryRun, Option<TrajectoryDetail>)> = self
             .config
             .methods
-            .iter()
+            .par_iter()
             .map(|&method| {
+                let mut detail = None;
                 let (truth, failure) = match method.fit(self.ctx, &train, &val) {
                     Ok(model) => {
                         if job.shown && Some(method) == self.config.detail_method() {
@@ -391,12 +422,21 @@ impl PathContext<'_> {
                     }
                     Err(e) => (None, Some(e.detail())),
                 };
-                TrajectoryRun {
+                let run = TrajectoryRun {
                     method,
                     truth,
                     failure,
                     ..template.clone()
-                }
+                };
+                (run, detail)
+            })
+            .collect();
+        let mut detail = None;
+        let runs = fitted
+            .into_iter()
+            .map(|(run, d)| {
+                detail = detail.take().or(d);
+                run
             })
             .collect();
         (runs, detail)
@@ -419,7 +459,7 @@ impl PathContext<'_> {
         Ok(self
             .config
             .methods
-            .iter()
+            .par_iter()
             .filter(|k| k.info().takes_inputs)
             .map(|&method| {
                 let (truth, failure) = match method.fit(self.ctx, &train, &val) {
