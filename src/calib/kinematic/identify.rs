@@ -236,7 +236,7 @@ fn unit(p: Param) -> &'static str {
 }
 
 /// Which structurally identifiable parameters the training data determine: Gram–Schmidt over the training
-/// Jacobian's columns in priority order (unscaled: a column's size is its effect), keeping a parameter when
+/// Jacobian's columns (or those of any matrix with the same `JᵀJ`, such as its QR triangle) in priority order (unscaled: a column's size is its effect), keeping a parameter when
 /// its standard deviation given the ones kept before it, `σ / rest` at the measurement's `noise` σ, is below
 /// its [`plausible_size`].
 /// The rest are held at their nominal values (zero error, no compliance) and returned with the reason. A
@@ -378,12 +378,14 @@ pub(super) fn synthetic_point(
     q: Vec<f64>,
 ) -> Point {
     let flange = problem.dh.flange_pose(&q);
-    Point {
-        y: flange * problem.base.mount,
-        orientation: problem.length.map(|_| flange.rotation),
-        tau: gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q)),
+    let tau = gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q));
+    Point::new(
+        problem.dh,
         q,
-    }
+        flange * problem.base.mount,
+        problem.length.map(|_| flange.rotation),
+        tau,
+    )
 }
 
 /// The identification Jacobian of `kinematic` (or `elastic`) at the nominal model, before anything is
@@ -490,12 +492,14 @@ mod tests {
                         .map(|i| sample_within(lower[i], upper[i], &mut rng))
                         .collect();
                     let f = dh.flange_pose(&q);
-                    Point {
-                        y: f * problem.base.mount,
-                        orientation: length.map(|_| f.rotation),
-                        tau: gravity.torques(&dh, &q),
+                    let tau = gravity.torques(&dh, &q);
+                    Point::new(
+                        &dh,
                         q,
-                    }
+                        f * problem.base.mount,
+                        length.map(|_| f.rotation),
+                        tau,
+                    )
                 })
                 .collect();
             let structural = Problem {
