@@ -90,15 +90,7 @@ impl Problem<'_> {
         mut j: Option<&mut DMatrix<f64>>,
     ) {
         let s = State::with(&self.base, &self.params, values);
-        let m = self.rows();
-        if r.len() != m {
-            *r = DVector::zeros(m);
-        }
-        if let Some(jm) = j.as_mut()
-            && jm.shape() != (m, self.params.len())
-        {
-            **jm = DMatrix::zeros(m, self.params.len());
-        }
+        self.shape(r, j.as_deref_mut());
         let rot = UnitQuaternion::from_scaled_axis(s.rho);
         let jl_rho = so3_left_jacobian(&s.rho);
         // Per frame, the left Jacobian of its rotation error (it does not depend on the configuration), and
@@ -166,39 +158,16 @@ impl Problem<'_> {
                 _ => None,
             };
             if let Some(jm) = j.as_mut() {
+                let at = AtPoint {
+                    v,
+                    p,
+                    frames: &frames,
+                    axes: &axes,
+                    rotation: &rotation,
+                    tau: &pt.tau,
+                };
                 for (c, prm) in self.params.iter().enumerate() {
-                    let col: Vector6<f64> = match *prm {
-                        Param::TrackerRotation(k) | Param::BaseRotation(k) => {
-                            let lin = v.cross_matrix() * jl_rho.column(k);
-                            let ang = match &rotation {
-                                Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
-                                None => Vector3::zeros(),
-                            };
-                            stack(&lin, &ang)
-                        }
-                        Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
-                            stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
-                        }
-                        Param::Mounting(k) => stack(
-                            &(frames.flange.rotation * Vector3::ith(k, 1.0)),
-                            &Vector3::zeros(),
-                        ),
-                        Param::Error(e) => {
-                            let (r, u, centre) = &axes[e.frame - 1];
-                            let k = (e.component - 1) % 3;
-                            let col = if e.component <= 3 {
-                                stack(&r.column(k).into_owned(), &Vector3::zeros())
-                            } else {
-                                let u = u.column(k).into_owned();
-                                stack(&u.cross(&(p - centre)), &u)
-                            };
-                            flange_column(col, &rotation)
-                        }
-                        Param::Compliance(jt) => flange_column(
-                            frames.joint_column(self.dh, jt, &p) * pt.tau[jt],
-                            &rotation,
-                        ),
-                    };
+                    let col = self.column(*prm, &jl_rho, &at);
                     let rows = if rotation.is_some() { 6 } else { 3 };
                     for k in 0..rows {
                         jm[(row + k, c)] = col[k];
@@ -208,6 +177,68 @@ impl Problem<'_> {
             row += if rotation.is_some() { 6 } else { 3 };
         }
     }
+
+    /// `r` and `j` resized to the problem's rows and parameters where they differ.
+    fn shape(&self, r: &mut DVector<f64>, j: Option<&mut DMatrix<f64>>) {
+        let (m, k) = (self.rows(), self.params.len());
+        if r.len() != m {
+            *r = DVector::zeros(m);
+        }
+        if let Some(j) = j
+            && j.shape() != (m, k)
+        {
+            *j = DMatrix::zeros(m, k);
+        }
+    }
+
+    /// The column of parameter `prm` at one point: [linear; angular] residual rows (the angular part used only
+    /// where the point's orientation is fitted).
+    fn column(&self, prm: Param, jl_rho: &Matrix3<f64>, at: &AtPoint) -> Vector6<f64> {
+        match prm {
+            Param::TrackerRotation(k) | Param::BaseRotation(k) => {
+                let lin = at.v.cross_matrix() * jl_rho.column(k);
+                let ang = match at.rotation {
+                    Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
+                    None => Vector3::zeros(),
+                };
+                stack(&lin, &ang)
+            }
+            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
+                stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
+            }
+            Param::Mounting(k) => stack(
+                &(at.frames.flange.rotation * Vector3::ith(k, 1.0)),
+                &Vector3::zeros(),
+            ),
+            Param::Error(e) => {
+                let (r, u, centre) = &at.axes[e.frame - 1];
+                let k = (e.component - 1) % 3;
+                let col = if e.component <= 3 {
+                    stack(&r.column(k).into_owned(), &Vector3::zeros())
+                } else {
+                    let u = u.column(k).into_owned();
+                    stack(&u.cross(&(at.p - centre)), &u)
+                };
+                flange_column(col, at.rotation)
+            }
+            Param::Compliance(jt) => flange_column(
+                at.frames.joint_column(self.dh, jt, &at.p) * at.tau[jt],
+                at.rotation,
+            ),
+        }
+    }
+}
+
+/// What a point's Jacobian columns are made of: the measured point turned by the tracker-frame rotation,
+/// the predicted point, the frames with errors, per frame its error axes and rotation centre, the rotation
+/// residual's weight and maps, the gravity torques.
+struct AtPoint<'a> {
+    v: Vector3<f64>,
+    p: Point3<f64>,
+    frames: &'a ErrorFrames,
+    axes: &'a [(Matrix3<f64>, Matrix3<f64>, Point3<f64>)],
+    rotation: &'a Option<(f64, Matrix3<f64>, Matrix3<f64>)>,
+    tau: &'a [f64],
 }
 
 fn stack(lin: &Vector3<f64>, ang: &Vector3<f64>) -> Vector6<f64> {
