@@ -16,7 +16,8 @@
 //! The callers make it well conditioned: the kinematic fit works in coordinates whitened by its starting
 //! Jacobian (columns orthonormal at the start).
 
-use nalgebra::{DMatrix, DMatrixView, DVector};
+use levenberg_marquardt::LeastSquaresProblem;
+use nalgebra::{DMatrix, DMatrixView, DVector, Dyn, Owned};
 
 /// Smallest Cholesky pivot of the column-scaled Gram matrix (whose diagonal is 1) for which the normal
 /// equations stand in for a QR: the scaled Jacobian's condition number is then at most about `1/MIN_PIVOT`.
@@ -29,12 +30,18 @@ pub struct Reduced {
     pub jacobian: DMatrix<f64>,
 }
 
-/// The small problem equivalent to residuals `r` and Jacobian `j` (m × n, m > n); `None` when either is
-/// not finite.
+/// The small problem equivalent to residuals `r` and Jacobian `j` (m × n; the problem itself where m ≤ n + 1);
+/// `None` when either is not finite.
 pub fn reduce(j: &DMatrix<f64>, r: &DVector<f64>) -> Option<Reduced> {
     let (m, n) = j.shape();
     if !(r.iter().all(|v| v.is_finite()) && j.iter().all(|v| v.is_finite())) {
         return None;
+    }
+    if m <= n + 1 {
+        return Some(Reduced {
+            residuals: r.clone(),
+            jacobian: j.clone(),
+        });
     }
     let (upper, a) = normal_equations(j, r).unwrap_or_else(|| householder(j, r));
     let rest2 = (r.norm_squared() - a.norm_squared()).max(0.0);
@@ -43,11 +50,75 @@ pub fn reduce(j: &DMatrix<f64>, r: &DVector<f64>) -> Option<Reduced> {
     residuals[n] = rest2.sqrt();
     let mut jacobian = DMatrix::zeros(n + 1, n);
     jacobian.view_mut((0, 0), (n, n)).copy_from(&upper);
-    debug_assert!(m > n, "a tall problem");
     Some(Reduced {
         residuals,
         jacobian,
     })
+}
+
+/// A tall problem as the crate's small one: at every point the crate tries, the inner problem's residuals and
+/// Jacobian, reduced.
+pub struct Small<P> {
+    pub inner: P,
+    small: Option<Reduced>,
+}
+
+impl<
+    P: LeastSquaresProblem<
+            f64,
+            Dyn,
+            Dyn,
+            ResidualStorage = Owned<f64, Dyn>,
+            JacobianStorage = Owned<f64, Dyn, Dyn>,
+            ParameterStorage = Owned<f64, Dyn>,
+        >,
+> Small<P>
+{
+    pub fn new(inner: P) -> Small<P> {
+        let mut s = Small { inner, small: None };
+        s.update();
+        s
+    }
+
+    fn update(&mut self) {
+        self.small = match (self.inner.residuals(), self.inner.jacobian()) {
+            (Some(r), Some(j)) => reduce(&j, &r),
+            _ => None,
+        };
+    }
+}
+
+impl<
+    P: LeastSquaresProblem<
+            f64,
+            Dyn,
+            Dyn,
+            ResidualStorage = Owned<f64, Dyn>,
+            JacobianStorage = Owned<f64, Dyn, Dyn>,
+            ParameterStorage = Owned<f64, Dyn>,
+        >,
+> LeastSquaresProblem<f64, Dyn, Dyn> for Small<P>
+{
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.inner.set_params(x);
+        self.update();
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.inner.params()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        self.small.as_ref().map(|s| s.residuals.clone())
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.small.as_ref().map(|s| s.jacobian.clone())
+    }
 }
 
 /// `R` and `a` from the Cholesky factor of the column-scaled `JᵀJ`; `None` where it is not well conditioned.
