@@ -7,8 +7,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Translation3, UnitQuaternion};
 
 use super::gravity::GravityModel;
 use super::identify::{
-    self, Identifiability, Undetermined, determined, identifiability, standard_deviations,
-    structural_set,
+    self, Identifiability, Undetermined, determined, identifiability, structural_set,
 };
 use super::noise::{self, Noise};
 use super::params::{Param, State, candidates};
@@ -371,14 +370,14 @@ fn solve_kept(
         ))
     })?;
     let values: Vec<f64> = minimum.x.iter().copied().collect();
-    let (r, j) = probe.evaluate(&values, true);
-    let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
+    let std = minimum.std.clone().unwrap_or_default();
+    let residual = minimum.residual.clone();
     Ok(Fit {
         id,
         minimum,
         values,
         std,
-        residual: r,
+        residual,
     })
 }
 

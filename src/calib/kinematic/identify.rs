@@ -323,24 +323,6 @@ pub(super) fn determined(
     (kept, undetermined)
 }
 
-/// Standard deviations of the parameters at a fitted estimate: `s·√((JᵀJ)⁻¹)ₖₖ` with `s²` the residual sum of
-/// squares over the degrees of freedom (`None` without any, or where `JᵀJ` is singular).
-pub(super) fn standard_deviations(j: &DMatrix<f64>, residual: &DVector<f64>) -> Option<Vec<f64>> {
-    let (m, k) = j.shape();
-    if m <= k {
-        return None;
-    }
-    let s2 = residual.norm_squared() / (m - k) as f64;
-    let r = j.clone().qr().r();
-    // (JᵀJ)⁻¹ = R⁻¹R⁻ᵀ: row norms of R⁻¹.
-    let std: Vec<f64> = r
-        .try_inverse()?
-        .row_iter()
-        .map(|row| (s2 * row.norm_squared()).sqrt())
-        .collect();
-    std.iter().all(|v| v.is_finite()).then_some(std)
-}
-
 /// The structurally identifiable parameters among `candidates`, in their order (see the module notes):
 /// the Jacobian at the start of `problem` over configurations drawn with a fixed seed, each carrying its
 /// gravity torques when compliances are candidates.

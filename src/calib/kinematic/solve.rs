@@ -28,6 +28,11 @@ pub(super) struct Minimum {
     pub(super) x: DVector<f64>,
     pub(super) evaluations: usize,
     pub(super) termination: Termination,
+    /// The residual rows at `x`.
+    pub(super) residual: DVector<f64>,
+    /// The standard deviations of `x` from the residual ([`standard_deviations`]), `None` where they are
+    /// not defined.
+    pub(super) std: Option<Vec<f64>>,
 }
 
 /// The least-squares problem in whitened coordinates `x = x0 + S·z`, for the `levenberg-marquardt` crate.
@@ -151,9 +156,38 @@ pub(super) fn minimize(
             "no convergence within {max_evaluations} evaluations"
         ));
     }
+    // The crate's last evaluation is at its answer (it goes back to it after a rejected step), so the
+    // residuals and the small problem there are the solution's.
+    let std = problem.small.as_ref().and_then(|small| {
+        standard_deviations(&small.jacobian.rows(0, k).into_owned(), s, &problem.r)
+    });
     Ok(Minimum {
         x: problem.x(),
         evaluations,
         termination,
+        std,
+        residual: problem.r,
     })
+}
+
+/// Standard deviations of the parameters, `s·√((JᵀJ)⁻¹)ₖₖ` with `s²` the residual sum of squares over the
+/// degrees of freedom, from the triangle `R` of the whitened Jacobian `J·S` (`RᵀR = (JS)ᵀJS`, so
+/// `(JᵀJ)⁻¹ = S R⁻¹ R⁻ᵀ Sᵀ`: the row norms of `S R⁻¹`); `None` without degrees of freedom or where `R` is
+/// singular.
+fn standard_deviations(
+    r: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    residual: &DVector<f64>,
+) -> Option<Vec<f64>> {
+    let (m, k) = (residual.len(), r.ncols());
+    if m <= k {
+        return None;
+    }
+    let s2 = residual.norm_squared() / (m - k) as f64;
+    let t = s * r.clone().try_inverse()?;
+    let std: Vec<f64> = t
+        .row_iter()
+        .map(|row| (s2 * row.norm_squared()).sqrt())
+        .collect();
+    std.iter().all(|v| v.is_finite()).then_some(std)
 }
