@@ -97,6 +97,15 @@ pub fn frame_errors(n: usize, params: &[ErrorParam], values: &[f64]) -> FrameErr
     out
 }
 
+/// E_i of every frame, `None` where its row is zero: skipping zero rows keeps e = 0 bit-identical to the
+/// nominal model.
+pub fn error_transforms(errors: &FrameErrors) -> Vec<Option<Isometry3<f64>>> {
+    errors
+        .iter()
+        .map(|e| e.iter().any(|&v| v != 0.0).then(|| error_transform(e)))
+        .collect()
+}
+
 /// E_i of one frame; see the module notes for why a rotation vector.
 fn error_transform(e: &[f64; 6]) -> Isometry3<f64> {
     Isometry3::from_parts(
@@ -428,23 +437,42 @@ impl ErrorFrames {
             "configuration length must equal the chain's dof"
         );
         assert_eq!(errors.len(), n, "one error row per DH frame");
-        let mut before = Vec::with_capacity(n);
-        let mut after = Vec::with_capacity(n + 1);
+        let mut frames = ErrorFrames {
+            before: Vec::with_capacity(n),
+            after: Vec::with_capacity(n + 1),
+            flange: Isometry3::identity(),
+        };
+        let links = q
+            .iter()
+            .enumerate()
+            .map(|(i, &qi)| dh.link_transform(i, qi));
+        frames.rebuild(dh, links, &error_transforms(errors));
+        frames
+    }
+
+    /// The frames again, in place, from the link transforms `A_i(q_i)` and the error transforms of
+    /// [`error_transforms`]: what a fit evaluating many points at one set of errors computes once (the error
+    /// transforms) or once per point for all fits (the link transforms at fixed joint angles). The same
+    /// products in the same order as [`ErrorFrames::new`], so the same bits.
+    pub fn rebuild(
+        &mut self,
+        dh: &DhChain,
+        links: impl Iterator<Item = Isometry3<f64>>,
+        transforms: &[Option<Isometry3<f64>>],
+    ) {
+        self.before.clear();
+        self.after.clear();
         let mut pose = dh.base;
-        after.push(pose);
-        for (i, (&qi, e)) in q.iter().zip(errors).enumerate() {
-            pose *= dh.link_transform(i, qi);
-            before.push(pose);
-            if e.iter().any(|&v| v != 0.0) {
-                pose *= error_transform(e);
+        self.after.push(pose);
+        for (link, e) in links.zip(transforms) {
+            pose *= link;
+            self.before.push(pose);
+            if let Some(e) = e {
+                pose *= e;
             }
-            after.push(pose);
+            self.after.push(pose);
         }
-        ErrorFrames {
-            before,
-            after,
-            flange: pose * dh.tool,
-        }
+        self.flange = pose * dh.tool;
     }
 
     /// d(point, flange rotation)/d e_ik at the errors the frames were built with, for a world point `p` fixed

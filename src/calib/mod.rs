@@ -4,9 +4,10 @@
 //! that choose a method):
 //!
 //! 1. `rigid` (point-set registration by SVD), `regression/` (ridge models and their selection),
-//!    `error_model` (the paper's error parameters on the DH chain) — no other file of calib;
+//!    `error_model` (the paper's error parameters on the DH chain), `reduced` (a tall least-squares problem
+//!    as Levenberg–Marquardt's equivalent small one) — no other file of calib;
 //! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
-//!    — `rigid`; `correction` (ridge models of what a reference prediction leaves: `ResidualCorrection`)
+//!    — `rigid`, `reduced`; `correction` (ridge models of what a reference prediction leaves: `ResidualCorrection`)
 //!    — `tracker_frame`, `regression`;
 //! 3. `method` (the `Method` trait — how a method fits —, the `Fitted` trait, `MethodInfo` — what a method is —,
 //!    `Basis`, `FitContext`) — `tracker_frame`, `regression`, `error_model`; it knows no method;
@@ -34,6 +35,7 @@ pub mod domain;
 pub mod error_model;
 pub mod kinematic;
 pub mod method;
+pub mod reduced;
 pub mod motion_inputs;
 pub mod paper;
 pub mod registry;

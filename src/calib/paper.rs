@@ -395,6 +395,10 @@ impl PaperModel {
     /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
     /// Outside the training domain the regressions are evaluated as [`Domain::regression_inputs`] says.
     pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        // `nominal` has no parameter: nothing to place in the domain or regress.
+        if self.position.is_empty() && self.orientation.is_empty() {
+            return (Vec::new(), Vec::new());
+        }
         let (q, inputs, w) = self.basis.domain.regression_inputs(q, inputs);
         let x = self.candidates_of(&q, &inputs);
         // Weight 1 leaves the bits alone.

@@ -19,6 +19,7 @@ use nalgebra::{
 };
 use serde::{Deserialize, Serialize};
 
+use super::reduced::Small;
 use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -410,9 +411,10 @@ fn fit_frame(
             DVector::from_vec(p)
         },
     };
-    let (problem, report) = LevenbergMarquardt::new()
+    let (small, report) = LevenbergMarquardt::new()
         .with_patience(200)
-        .minimize(problem);
+        .minimize(Small::new(problem));
+    let problem = small.inner;
     if !report.termination.was_successful() {
         return Err(Error::Invalid(format!(
             "tracker frame: the least-squares refinement failed: {}",

@@ -7,8 +7,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Translation3, UnitQuaternion};
 
 use super::gravity::GravityModel;
 use super::identify::{
-    self, Identifiability, Undetermined, determined, identifiability, standard_deviations,
-    structural_set,
+    self, Identifiability, Undetermined, determined, identifiability, structural_set,
 };
 use super::noise::{self, Noise};
 use super::params::{Param, State, candidates};
@@ -57,11 +56,9 @@ pub(super) fn points(
     obs: Vec<Observation>,
 ) -> Vec<Point> {
     obs.into_iter()
-        .map(|o| Point {
-            tau: gravity.map_or_else(Vec::new, |g| g.torques(dh, &o.q)),
-            q: o.q,
-            y: o.position,
-            orientation: o.orientation,
+        .map(|o| {
+            let tau = gravity.map_or_else(Vec::new, |g| g.torques(dh, &o.q));
+            Point::new(dh, o.q, o.position, o.orientation, tau)
         })
         .collect()
 }
@@ -99,7 +96,10 @@ pub(super) fn structural(
     (structural, dropped)
 }
 
-/// The Jacobian of the structural set at the base state, on the probe's points.
+/// The Jacobian of the structural set at the base state, on the probe's points, as the triangle `R` of its
+/// QR (`RᵀR = JᵀJ`): the lengths of its columns and the angles between them, which are all that judging
+/// what the data determine reads ([`determined`]), in as many rows as there are parameters instead of three
+/// per point — the judgement runs several times a fit.
 pub(super) fn jacobian_at_base(
     probe: &mut Problem,
     base: &State,
@@ -107,10 +107,11 @@ pub(super) fn jacobian_at_base(
 ) -> DMatrix<f64> {
     probe.params = structural.to_vec();
     let x_struct: Vec<f64> = structural.iter().map(|&p| base.get(p)).collect();
-    probe
+    let j = probe
         .evaluate(&x_struct, true)
         .1
-        .expect("jacobian requested")
+        .expect("jacobian requested");
+    if j.nrows() > j.ncols() { j.qr().r() } else { j }
 }
 
 /// What [`solve_within_bounds`] leaves: the kept parameters, their values and standard deviations, the
@@ -369,14 +370,14 @@ fn solve_kept(
         ))
     })?;
     let values: Vec<f64> = minimum.x.iter().copied().collect();
-    let (r, j) = probe.evaluate(&values, true);
-    let std = standard_deviations(&j.expect("jacobian requested"), &r).unwrap_or_default();
+    let std = minimum.std.clone().unwrap_or_default();
+    let residual = minimum.residual.clone();
     Ok(Fit {
         id,
         minimum,
         values,
         std,
-        residual: r,
+        residual,
     })
 }
 

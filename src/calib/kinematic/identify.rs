@@ -236,7 +236,7 @@ fn unit(p: Param) -> &'static str {
 }
 
 /// Which structurally identifiable parameters the training data determine: Gram–Schmidt over the training
-/// Jacobian's columns in priority order (unscaled: a column's size is its effect), keeping a parameter when
+/// Jacobian's columns (or those of any matrix with the same `JᵀJ`, such as its QR triangle) in priority order (unscaled: a column's size is its effect), keeping a parameter when
 /// its standard deviation given the ones kept before it, `σ / rest` at the measurement's `noise` σ, is below
 /// its [`plausible_size`].
 /// The rest are held at their nominal values (zero error, no compliance) and returned with the reason. A
@@ -323,24 +323,6 @@ pub(super) fn determined(
     (kept, undetermined)
 }
 
-/// Standard deviations of the parameters at a fitted estimate: `s·√((JᵀJ)⁻¹)ₖₖ` with `s²` the residual sum of
-/// squares over the degrees of freedom (`None` without any, or where `JᵀJ` is singular).
-pub(super) fn standard_deviations(j: &DMatrix<f64>, residual: &DVector<f64>) -> Option<Vec<f64>> {
-    let (m, k) = j.shape();
-    if m <= k {
-        return None;
-    }
-    let s2 = residual.norm_squared() / (m - k) as f64;
-    let r = j.clone().qr().r();
-    // (JᵀJ)⁻¹ = R⁻¹R⁻ᵀ: row norms of R⁻¹.
-    let std: Vec<f64> = r
-        .try_inverse()?
-        .row_iter()
-        .map(|row| (s2 * row.norm_squared()).sqrt())
-        .collect();
-    std.iter().all(|v| v.is_finite()).then_some(std)
-}
-
 /// The structurally identifiable parameters among `candidates`, in their order (see the module notes):
 /// the Jacobian at the start of `problem` over configurations drawn with a fixed seed, each carrying its
 /// gravity torques when compliances are candidates.
@@ -378,12 +360,14 @@ pub(super) fn synthetic_point(
     q: Vec<f64>,
 ) -> Point {
     let flange = problem.dh.flange_pose(&q);
-    Point {
-        y: flange * problem.base.mount,
-        orientation: problem.length.map(|_| flange.rotation),
-        tau: gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q)),
+    let tau = gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q));
+    Point::new(
+        problem.dh,
         q,
-    }
+        flange * problem.base.mount,
+        problem.length.map(|_| flange.rotation),
+        tau,
+    )
 }
 
 /// The identification Jacobian of `kinematic` (or `elastic`) at the nominal model, before anything is
@@ -490,12 +474,14 @@ mod tests {
                         .map(|i| sample_within(lower[i], upper[i], &mut rng))
                         .collect();
                     let f = dh.flange_pose(&q);
-                    Point {
-                        y: f * problem.base.mount,
-                        orientation: length.map(|_| f.rotation),
-                        tau: gravity.torques(&dh, &q),
+                    let tau = gravity.torques(&dh, &q);
+                    Point::new(
+                        &dh,
                         q,
-                    }
+                        f * problem.base.mount,
+                        length.map(|_| f.rotation),
+                        tau,
+                    )
                 })
                 .collect();
             let structural = Problem {

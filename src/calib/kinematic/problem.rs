@@ -1,10 +1,10 @@
 //! The least-squares problem shared by the structural analysis, the rank check and Levenberg–Marquardt: the
 //! residuals of the measured points and their analytic Jacobian at the current estimate.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Point3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, UnitQuaternion, Vector3, Vector6};
 
 use super::params::{Param, State};
-use crate::calib::error_model::{ErrorFrames, so3_left_jacobian};
+use crate::calib::error_model::{ErrorFrames, error_transforms, so3_left_jacobian};
 use crate::robot::dh::DhChain;
 
 /// What the model knows about each fitted point.
@@ -16,6 +16,35 @@ pub(super) struct Point {
     pub(super) orientation: Option<UnitQuaternion<f64>>,
     /// Gravity torques at the commanded angles (elastic only; empty otherwise).
     pub(super) tau: Vec<f64>,
+    /// The link transforms `A_i(q_i)` where the angles do not move with the parameters (no compliance:
+    /// `tau` empty), computed once for every evaluation; empty otherwise.
+    links: Vec<Isometry3<f64>>,
+}
+
+impl Point {
+    pub(super) fn new(
+        dh: &DhChain,
+        q: Vec<f64>,
+        y: Point3<f64>,
+        orientation: Option<UnitQuaternion<f64>>,
+        tau: Vec<f64>,
+    ) -> Point {
+        let links = if tau.is_empty() {
+            q.iter()
+                .enumerate()
+                .map(|(i, &qi)| dh.link_transform(i, qi))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Point {
+            q,
+            y,
+            orientation,
+            tau,
+            links,
+        }
+    }
 }
 
 /// The problem shared by the structural analysis, the rank check and Levenberg–Marquardt.
@@ -46,10 +75,22 @@ impl Problem<'_> {
         values: &[f64],
         jacobian: bool,
     ) -> (DVector<f64>, Option<DMatrix<f64>>) {
+        let mut r = DVector::zeros(0);
+        let mut j = jacobian.then(|| DMatrix::zeros(0, 0));
+        self.evaluate_into(values, &mut r, j.as_mut());
+        (r, j)
+    }
+
+    /// [`Problem::evaluate`] into `r` and `j` (resized where their shapes differ; every entry written), so
+    /// that Levenberg–Marquardt's iterations reuse them.
+    pub(super) fn evaluate_into(
+        &self,
+        values: &[f64],
+        r: &mut DVector<f64>,
+        mut j: Option<&mut DMatrix<f64>>,
+    ) {
         let s = State::with(&self.base, &self.params, values);
-        let m = self.rows();
-        let mut r = DVector::zeros(m);
-        let mut j = jacobian.then(|| DMatrix::zeros(m, self.params.len()));
+        self.shape(r, j.as_deref_mut());
         let rot = UnitQuaternion::from_scaled_axis(s.rho);
         let jl_rho = so3_left_jacobian(&s.rho);
         // Per frame, the left Jacobian of its rotation error (it does not depend on the configuration), and
@@ -59,12 +100,33 @@ impl Problem<'_> {
             .iter()
             .map(|e| so3_left_jacobian(&Vector3::new(e[3], e[4], e[5])))
             .collect();
+        let transforms = error_transforms(&s.errors);
         let mut axes: Vec<(Matrix3<f64>, Matrix3<f64>, Point3<f64>)> =
             vec![(Matrix3::zeros(), Matrix3::zeros(), Point3::origin()); s.errors.len()];
+        let mut frames = ErrorFrames {
+            before: Vec::with_capacity(s.errors.len()),
+            after: Vec::with_capacity(s.errors.len() + 1),
+            flange: self.dh.base,
+        };
+        let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
-            let qd = s.deflected(&pt.q, &pt.tau);
-            let frames = ErrorFrames::new(self.dh, &qd, &s.errors);
+            if pt.links.is_empty() {
+                qd.clear();
+                qd.extend(
+                    pt.q.iter()
+                        .zip(&pt.tau)
+                        .zip(&s.compliance)
+                        .map(|((q, t), c)| q + c * t),
+                );
+                let links = qd
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &qi)| self.dh.link_transform(i, qi));
+                frames.rebuild(self.dh, links, &transforms);
+            } else {
+                frames.rebuild(self.dh, pt.links.iter().copied(), &transforms);
+            }
             if j.is_some() {
                 for (i, ((g, e), jl)) in frames
                     .before
@@ -96,39 +158,16 @@ impl Problem<'_> {
                 _ => None,
             };
             if let Some(jm) = j.as_mut() {
+                let at = AtPoint {
+                    v,
+                    p,
+                    frames: &frames,
+                    axes: &axes,
+                    rotation: &rotation,
+                    tau: &pt.tau,
+                };
                 for (c, prm) in self.params.iter().enumerate() {
-                    let col: Vector6<f64> = match *prm {
-                        Param::TrackerRotation(k) | Param::BaseRotation(k) => {
-                            let lin = v.cross_matrix() * jl_rho.column(k);
-                            let ang = match &rotation {
-                                Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
-                                None => Vector3::zeros(),
-                            };
-                            stack(&lin, &ang)
-                        }
-                        Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
-                            stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
-                        }
-                        Param::Mounting(k) => stack(
-                            &(frames.flange.rotation * Vector3::ith(k, 1.0)),
-                            &Vector3::zeros(),
-                        ),
-                        Param::Error(e) => {
-                            let (r, u, centre) = &axes[e.frame - 1];
-                            let k = (e.component - 1) % 3;
-                            let col = if e.component <= 3 {
-                                stack(&r.column(k).into_owned(), &Vector3::zeros())
-                            } else {
-                                let u = u.column(k).into_owned();
-                                stack(&u.cross(&(p - centre)), &u)
-                            };
-                            flange_column(col, &rotation)
-                        }
-                        Param::Compliance(jt) => flange_column(
-                            frames.joint_column(self.dh, jt, &p) * pt.tau[jt],
-                            &rotation,
-                        ),
-                    };
+                    let col = self.column(*prm, &jl_rho, &at);
                     let rows = if rotation.is_some() { 6 } else { 3 };
                     for k in 0..rows {
                         jm[(row + k, c)] = col[k];
@@ -137,8 +176,69 @@ impl Problem<'_> {
             }
             row += if rotation.is_some() { 6 } else { 3 };
         }
-        (r, j)
     }
+
+    /// `r` and `j` resized to the problem's rows and parameters where they differ.
+    fn shape(&self, r: &mut DVector<f64>, j: Option<&mut DMatrix<f64>>) {
+        let (m, k) = (self.rows(), self.params.len());
+        if r.len() != m {
+            *r = DVector::zeros(m);
+        }
+        if let Some(j) = j
+            && j.shape() != (m, k)
+        {
+            *j = DMatrix::zeros(m, k);
+        }
+    }
+
+    /// The column of parameter `prm` at one point: [linear; angular] residual rows (the angular part used only
+    /// where the point's orientation is fitted).
+    fn column(&self, prm: Param, jl_rho: &Matrix3<f64>, at: &AtPoint) -> Vector6<f64> {
+        match prm {
+            Param::TrackerRotation(k) | Param::BaseRotation(k) => {
+                let lin = at.v.cross_matrix() * jl_rho.column(k);
+                let ang = match at.rotation {
+                    Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
+                    None => Vector3::zeros(),
+                };
+                stack(&lin, &ang)
+            }
+            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
+                stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
+            }
+            Param::Mounting(k) => stack(
+                &(at.frames.flange.rotation * Vector3::ith(k, 1.0)),
+                &Vector3::zeros(),
+            ),
+            Param::Error(e) => {
+                let (r, u, centre) = &at.axes[e.frame - 1];
+                let k = (e.component - 1) % 3;
+                let col = if e.component <= 3 {
+                    stack(&r.column(k).into_owned(), &Vector3::zeros())
+                } else {
+                    let u = u.column(k).into_owned();
+                    stack(&u.cross(&(at.p - centre)), &u)
+                };
+                flange_column(col, at.rotation)
+            }
+            Param::Compliance(jt) => flange_column(
+                at.frames.joint_column(self.dh, jt, &at.p) * at.tau[jt],
+                at.rotation,
+            ),
+        }
+    }
+}
+
+/// What a point's Jacobian columns are made of: the measured point turned by the tracker-frame rotation,
+/// the predicted point, the frames with errors, per frame its error axes and rotation centre, the rotation
+/// residual's weight and maps, the gravity torques.
+struct AtPoint<'a> {
+    v: Vector3<f64>,
+    p: Point3<f64>,
+    frames: &'a ErrorFrames,
+    axes: &'a [(Matrix3<f64>, Matrix3<f64>, Point3<f64>)],
+    rotation: &'a Option<(f64, Matrix3<f64>, Matrix3<f64>)>,
+    tau: &'a [f64],
 }
 
 fn stack(lin: &Vector3<f64>, ang: &Vector3<f64>) -> Vector6<f64> {
@@ -192,6 +292,7 @@ mod tests {
                         .then(|| UnitQuaternion::from_euler_angles(0.01, 0.02, 0.03) * f.rotation),
                     tau: gravity.torques(&dh, &q),
                     q,
+                    links: Vec::new(),
                 }
             })
             .collect();

@@ -5,6 +5,7 @@ use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use serde::{Deserialize, Serialize};
 
 use super::problem::Problem;
+use crate::calib::reduced::{Reduced, reduce};
 
 /// How the minimization ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -27,21 +28,32 @@ pub(super) struct Minimum {
     pub(super) x: DVector<f64>,
     pub(super) evaluations: usize,
     pub(super) termination: Termination,
+    /// The residual rows at `x`.
+    pub(super) residual: DVector<f64>,
+    /// The standard deviations of `x` from the residual ([`standard_deviations`]), `None` where they are
+    /// not defined.
+    pub(super) std: Option<Vec<f64>>,
 }
 
 /// The least-squares problem in whitened coordinates `x = x0 + S·z`, for the `levenberg-marquardt` crate.
 /// `S` makes `J(x0)·S` orthonormal: the trust region is then a ball in the data's metric, and steps follow
 /// the long, gently curved valleys of a weakly excited campaign instead of zig-zagging across them, which
-/// keeps the iterations (each a QR of the full Jacobian) to a handful.
+/// keeps the iterations to a handful. The crate sees the equivalent small problem ([`reduced`]): the
+/// whitened Jacobian's columns are near orthonormal, so its Gram matrix is as well conditioned as a
+/// problem gets.
 struct Whitened<'a> {
     problem: &'a Problem<'a>,
     x0: &'a DVector<f64>,
     s: &'a DMatrix<f64>,
     z: DVector<f64>,
+    /// The residual rows at `z`.
     r: DVector<f64>,
-    /// The Jacobian at `z`, computed when the crate asks for it: it does so only at accepted steps, so
-    /// rejected trial points cost a residual evaluation alone.
-    jz: std::cell::OnceCell<Option<DMatrix<f64>>>,
+    /// The Jacobian at `z` (unwhitened, then whitened): buffers reused from point to point.
+    j: DMatrix<f64>,
+    jz: DMatrix<f64>,
+    /// The small problem at `z`, `None` where the residuals or the Jacobian are not finite. Every point the
+    /// crate tries gets its Jacobian, since the small residuals are expressed through it.
+    small: Option<Reduced>,
 }
 
 impl Whitened<'_> {
@@ -57,8 +69,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
 
     fn set_params(&mut self, z: &DVector<f64>) {
         self.z.copy_from(z);
-        self.r = self.problem.evaluate(self.x().as_slice(), false).0;
-        self.jz = std::cell::OnceCell::new();
+        let x = self.x();
+        self.problem
+            .evaluate_into(x.as_slice(), &mut self.r, Some(&mut self.j));
+        self.jz.gemm(1.0, &self.j, self.s, 0.0);
+        self.small = reduce(&self.jz, &self.r);
     }
 
     fn params(&self) -> DVector<f64> {
@@ -66,17 +81,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        self.r.iter().all(|v| v.is_finite()).then(|| self.r.clone())
+        self.small.as_ref().map(|s| s.residuals.clone())
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        self.jz
-            .get_or_init(|| {
-                let (_, j) = self.problem.evaluate(self.x().as_slice(), true);
-                j.map(|j| j * self.s)
-            })
-            .clone()
-            .filter(|j| j.iter().all(|v| v.is_finite()))
+        self.small.as_ref().map(|s| s.jacobian.clone())
     }
 }
 
@@ -89,13 +98,16 @@ pub(super) fn minimize(
     max_evaluations: usize,
 ) -> std::result::Result<Minimum, String> {
     let k = x0.len();
+    let m = problem.rows();
     let mut problem = Whitened {
         problem,
         x0,
         s,
         z: DVector::zeros(k),
-        r: DVector::zeros(0),
-        jz: std::cell::OnceCell::new(),
+        r: DVector::zeros(m),
+        j: DMatrix::zeros(m, k),
+        jz: DMatrix::zeros(m, k),
+        small: None,
     };
     // The linearized solution first (classical calibration's first estimate): in whitened coordinates the
     // Jacobian has orthonormal columns, so the Gauss–Newton step is a product. The problem is nearly linear
@@ -103,7 +115,10 @@ pub(super) fn minimize(
     // starts from the nominal model instead.
     problem.set_params(&DVector::zeros(k));
     let start_norm = problem.r.norm();
-    let gauss_newton = problem.jacobian().map(|jz| -(jz.tr_mul(&problem.r)));
+    let gauss_newton = problem
+        .small
+        .is_some()
+        .then(|| -(problem.jz.tr_mul(&problem.r)));
     let mut evaluations_before = 1;
     if let Some(z0) = gauss_newton {
         problem.set_params(&z0);
@@ -141,9 +156,38 @@ pub(super) fn minimize(
             "no convergence within {max_evaluations} evaluations"
         ));
     }
+    // The crate's last evaluation is at its answer (it goes back to it after a rejected step), so the
+    // residuals and the small problem there are the solution's.
+    let std = problem.small.as_ref().and_then(|small| {
+        standard_deviations(&small.jacobian.rows(0, k).into_owned(), s, &problem.r)
+    });
     Ok(Minimum {
         x: problem.x(),
         evaluations,
         termination,
+        std,
+        residual: problem.r,
     })
+}
+
+/// Standard deviations of the parameters, `s·√((JᵀJ)⁻¹)ₖₖ` with `s²` the residual sum of squares over the
+/// degrees of freedom, from the triangle `R` of the whitened Jacobian `J·S` (`RᵀR = (JS)ᵀJS`, so
+/// `(JᵀJ)⁻¹ = S R⁻¹ R⁻ᵀ Sᵀ`: the row norms of `S R⁻¹`); `None` without degrees of freedom or where `R` is
+/// singular.
+fn standard_deviations(
+    r: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    residual: &DVector<f64>,
+) -> Option<Vec<f64>> {
+    let (m, k) = (residual.len(), r.ncols());
+    if m <= k {
+        return None;
+    }
+    let s2 = residual.norm_squared() / (m - k) as f64;
+    let t = s * r.clone().try_inverse()?;
+    let std: Vec<f64> = t
+        .row_iter()
+        .map(|row| (s2 * row.norm_squared()).sqrt())
+        .collect();
+    std.iter().all(|v| v.is_finite()).then_some(std)
 }
