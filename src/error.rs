@@ -10,8 +10,8 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// A URDF that cannot be read or that does not describe a usable serial chain.
-    #[error("URDF {origin}: {message}")]
+    /// A robot description (URDF or DH table) that cannot be read or that does not describe a usable serial chain.
+    #[error("robot {origin}: {message}")]
     Urdf { origin: String, message: String },
     /// A scenario file that does not parse or whose values make no sense.
     #[error("scenario {origin}: {message}")]

@@ -204,7 +204,7 @@ fn bad_urdfs_are_refused_with_a_clear_message() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.starts_with("URDF garbled: not a valid URDF") && !e.contains('\n'),
+        e.starts_with("robot garbled: not a valid URDF") && !e.contains('\n'),
         "{e}"
     );
 }
