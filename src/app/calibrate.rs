@@ -162,16 +162,26 @@ impl Inputs {
     }
 }
 
+/// The robot (its chain and the DH form the fits work in) and the column mapping a measured file is read with.
+pub(crate) fn robot_and_mapping(
+    robot: &Path,
+    flange_link: Option<&str>,
+    mapping: Option<&Path>,
+) -> Result<(Chain, DhChain, Option<ColumnMapping>)> {
+    let chain = crate::robot::load(robot, flange_link)?;
+    let dh = DhChain::from_chain(&chain)?;
+    let mapping = mapping.map(ColumnMapping::load).transpose()?;
+    Ok((chain, dh, mapping))
+}
+
 /// Reads the robot, the data and the test campaign (each checked against the joint ranges and synchronised),
 /// the truth, and splits the data.
 fn read(options: &FitOptions) -> Result<Inputs> {
-    let chain = crate::robot::load(&options.robot, options.flange_link.as_deref())?;
-    let dh = DhChain::from_chain(&chain)?;
-    let mapping = options
-        .mapping
-        .as_deref()
-        .map(ColumnMapping::load)
-        .transpose()?;
+    let (chain, dh, mapping) = robot_and_mapping(
+        &options.robot,
+        options.flange_link.as_deref(),
+        options.mapping.as_deref(),
+    )?;
     // Measured on the fly, a campaign is corrected for the clock offset first (in `read_measured`); with
     // `--motion-inputs` its motion then becomes the methods' inputs.
     let measured = |path: &Path, mapping: Option<&ColumnMapping>| {

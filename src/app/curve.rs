@@ -11,13 +11,11 @@ use clap::Args;
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
 use crate::calib::regression::RegressionOptions;
-use crate::dataset::mapping::ColumnMapping;
 use crate::error::{Error, Result};
 use crate::eval::curve::{self, CurvePlan, LearningCurve, learning_curve};
 use crate::eval::split::{DEFAULT_FRACTIONS, SplitRule};
 use crate::output;
 use crate::report::plots::{self, Band};
-use crate::robot::dh::DhChain;
 
 use super::arg_values;
 use super::calibrate::{self, read_measured};
@@ -129,13 +127,11 @@ pub fn curve(options: &CurveOptions) -> Result<CurveOutcome> {
     }
     let payload = calibrate::payload(options.payload_kg, &options.payload_com_m)?;
     output::check_dir(&options.out, &OUTPUTS)?;
-    let chain = crate::robot::load(&options.robot, options.flange_link.as_deref())?;
-    let dh = DhChain::from_chain(&chain)?;
-    let mapping = options
-        .mapping
-        .as_deref()
-        .map(ColumnMapping::load)
-        .transpose()?;
+    let (chain, dh, mapping) = calibrate::robot_and_mapping(
+        &options.robot,
+        options.flange_link.as_deref(),
+        options.mapping.as_deref(),
+    )?;
     let (data, _) = read_measured(
         &options.data,
         mapping.as_ref(),
