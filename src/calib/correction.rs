@@ -12,7 +12,7 @@ use nalgebra::{DMatrix, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
+use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
 use super::tracker_frame::Observation;
 use crate::dataset::MOTION_INPUT_PREFIX;
 use crate::error::{Error, Result};
@@ -108,19 +108,25 @@ pub(super) fn mean(values: impl Iterator<Item = f64>) -> f64 {
     if n == 0 { 0.0 } else { sum / n as f64 }
 }
 
-impl ResidualCorrection {
-    /// Fits the residuals of `train` against `reference`, choosing on `val`. The orientation is modelled when
-    /// `orientation` is set and every training and validation observation measures it. `extra_inputs`: names
-    /// of the observations' inputs beyond the joint angles, offered to the regression as candidates.
-    pub fn fit(
+/// What a residual fit needs besides the reference predictions, prepared once for every fit on the same
+/// points (`residual-ridge` refits its residual each registration round): the checked candidate rows, the
+/// extra inputs' means, and the regression's features of the rows.
+pub(super) struct ResidualSetup {
+    candidates: Vec<String>,
+    input_means: Vec<f64>,
+    x_val_rows: Vec<Vec<f64>>,
+    regression: Candidates,
+}
+
+impl ResidualSetup {
+    /// The setup of observations `train` and `val` (their joint angles and extra inputs; the positions and
+    /// orientations come with each fit).
+    pub(super) fn new(
         joint_names: &[String],
         extra_inputs: &[String],
-        reference: &dyn Fn(&[f64]) -> Reference,
         train: &[Observation],
         val: &[Observation],
-        orientation: bool,
-        opts: &RegressionOptions,
-    ) -> Result<ResidualCorrection> {
+    ) -> Result<ResidualSetup> {
         let dof = joint_names.len();
         if let Some(o) = train.iter().chain(val).find(|o| o.q.len() != dof) {
             return Err(Error::Invalid(format!(
@@ -146,28 +152,71 @@ impl ResidualCorrection {
                 }
             })
             .collect();
+        let x_val = candidate_matrix(val, dof, extra);
+        Ok(ResidualSetup {
+            candidates: joint_names.iter().chain(extra_inputs).cloned().collect(),
+            input_means,
+            x_val_rows: (0..val.len())
+                .map(|r| x_val.row(r).iter().copied().collect())
+                .collect(),
+            regression: Candidates::new(candidate_matrix(train, dof, extra), x_val)
+                .keeping_factors(),
+        })
+    }
+}
+
+impl ResidualCorrection {
+    /// Fits the residuals of `train` against `reference`, choosing on `val`. The orientation is modelled when
+    /// `orientation` is set and every training and validation observation measures it. `extra_inputs`: names
+    /// of the observations' inputs beyond the joint angles, offered to the regression as candidates.
+    pub fn fit(
+        joint_names: &[String],
+        extra_inputs: &[String],
+        reference: &dyn Fn(&[f64]) -> Reference,
+        train: &[Observation],
+        val: &[Observation],
+        orientation: bool,
+        opts: &RegressionOptions,
+    ) -> Result<ResidualCorrection> {
+        let mut setup = ResidualSetup::new(joint_names, extra_inputs, train, val)?;
         let refs_train: Vec<Reference> = train.iter().map(|o| reference(&o.q)).collect();
         let refs_val: Vec<Reference> = val.iter().map(|o| reference(&o.q)).collect();
+        ResidualCorrection::fit_prepared(
+            &mut setup,
+            (train, &refs_train),
+            (val, &refs_val),
+            orientation,
+            opts,
+        )
+    }
+
+    /// [`ResidualCorrection::fit`] on a setup of the same observations' rows, with the reference predictions
+    /// of the training and validation observations given.
+    pub(super) fn fit_prepared(
+        setup: &mut ResidualSetup,
+        (train, refs_train): (&[Observation], &[Reference]),
+        (val, refs_val): (&[Observation], &[Reference]),
+        orientation: bool,
+        opts: &RegressionOptions,
+    ) -> Result<ResidualCorrection> {
         let res = |obs: &[Observation], refs: &[Reference]| -> Vec<_> {
             obs.iter()
                 .zip(refs)
                 .map(|(o, r)| residual_of(o, r))
                 .collect()
         };
-        let (res_train, res_val) = (res(train, &refs_train), res(val, &refs_val));
+        let (res_train, res_val) = (res(train, refs_train), res(val, refs_val));
         let with_orientation =
             orientation && res_train.iter().chain(&res_val).all(|r| r.1.is_some());
-        let (x_train, x_val) = (
-            candidate_matrix(train, dof, extra),
-            candidate_matrix(val, dof, extra),
-        );
-        let regress = |names: [&str; 3],
-                       component: &dyn Fn(&Residual) -> Vector3<f64>|
+        let x_val_rows = &setup.x_val_rows;
+        let regression = &mut setup.regression;
+        let mut regress = |names: [&str; 3],
+                           component: &dyn Fn(&Residual) -> Vector3<f64>|
          -> Result<Vec<ComponentModel>> {
             let matrix =
                 |rows: &[Residual]| DMatrix::from_fn(rows.len(), 3, |r, c| component(&rows[r])[c]);
             let y_val = matrix(&res_val);
-            let models = fit_all(&x_train, &matrix(&res_train), &x_val, &y_val, opts)?;
+            let models = regression.fit(&matrix(&res_train), &y_val, opts)?;
             Ok(names
                 .iter()
                 .zip(models)
@@ -175,9 +224,7 @@ impl ResidualCorrection {
                 .map(|(k, (name, model))| {
                     // No worse than no correction, in the validation sum of squares.
                     let y: Vec<f64> = y_val.column(k).iter().copied().collect();
-                    let fitted: Vec<f64> = (0..val.len())
-                        .map(|r| model.predict(x_val.row(r).transpose().as_slice()))
-                        .collect();
+                    let fitted: Vec<f64> = x_val_rows.iter().map(|x| model.predict(x)).collect();
                     let sse_model: f64 = y.iter().zip(&fitted).map(|(a, b)| (a - b).powi(2)).sum();
                     let sse_zero: f64 = y.iter().map(|a| a * a).sum();
                     let kept = sse_model < sse_zero;
@@ -193,17 +240,19 @@ impl ResidualCorrection {
                 })
                 .collect())
         };
-        let mut correction = ResidualCorrection {
-            candidates: joint_names.iter().chain(extra_inputs).cloned().collect(),
-            input_means,
-            position: regress(POSITION_NAMES, &|r| r.0)?,
-            orientation: if with_orientation {
-                regress(ORIENTATION_NAMES, &|r| r.1.unwrap_or_default())?
-            } else {
-                Vec::new()
-            },
+        let position = regress(POSITION_NAMES, &|r| r.0)?;
+        let orientation = if with_orientation {
+            regress(ORIENTATION_NAMES, &|r| r.1.unwrap_or_default())?
+        } else {
+            Vec::new()
         };
-        correction.prune(val, &refs_val);
+        let mut correction = ResidualCorrection {
+            candidates: setup.candidates.clone(),
+            input_means: setup.input_means.clone(),
+            position,
+            orientation,
+        };
+        correction.prune(val, refs_val);
         Ok(correction)
     }
 

@@ -4,7 +4,7 @@
 //! out to their parametric part just beyond it (the constant part of each regression, its intercept: constant
 //! error parameters for the paper's models, a constant offset for the residual models, the base alone where
 //! a hybrid's residual has none), or
-//! farther than [`Domain::radius_rad`] from every training configuration ([`Domain::regression_inputs`]); `calibrate` says per
+//! farther than [`Domain::radius_rad`] from every training configuration ([`Domain::weight`]); `calibrate` says per
 //! point whether it lies inside. Measured on UR10 C → D and C → B (README): holding the inputs at the edge
 //! instead leaves `paper-rotxyz` 3.6× and `residual-ridge` 1.2× above `nominal` on D, since a polynomial at
 //! its edge still carries its steepest value, and the same joint values on another branch are another pose.
@@ -74,12 +74,7 @@ impl Domain {
         let step = q.len().div_ceil(SAMPLE).max(1);
         let sample: Vec<Vec<f64>> = q.iter().step_by(step).map(|q| q.to_vec()).collect();
         let spacing = (0..sample.len())
-            .map(|i| {
-                (0..sample.len())
-                    .filter(|&k| k != i)
-                    .map(|k| distance(&sample[i], &sample[k]))
-                    .fold(f64::INFINITY, f64::min)
-            })
+            .map(|i| nearest(&sample, &sample[i], Some(i)))
             .filter(|d| d.is_finite())
             .fold(0.0, f64::max);
         Domain {
@@ -93,44 +88,59 @@ impl Domain {
         }
     }
 
-    /// How a regression is evaluated for a point at `q` with `inputs`: the joint angles and inputs to
-    /// evaluate it at, and the weight its correction gets: 1 inside the domain, fading linearly to 0
-    /// (the model's parametric part alone) over [`FADE_RAD`] beyond the joint ranges (the inputs' ranges
-    /// over [`FADE_INPUT`] of their width), and from [`Domain::radius_rad`] to 1.25 times that away from
-    /// the training configurations. Continuous, so a controller's inverse through the model still
-    /// converges across the boundary.
-    pub fn regression_inputs(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
-        let (qc, ic) = (self.clamp_joints(q), self.clamp_inputs(inputs));
+    /// The weight a regression's correction gets for a point at `q` with `inputs` (evaluated at the point
+    /// itself): 1 inside the domain, fading linearly to 0 (the model's parametric part alone) over
+    /// [`FADE_RAD`] beyond the joint ranges (the inputs' ranges over [`FADE_INPUT`] of their width), and from
+    /// [`Domain::radius_rad`] to 1.25 times that away from the training configurations. Continuous, so a
+    /// controller's inverse through the model still converges across the boundary.
+    ///
+    /// Evaluated at the point, not at the edge: a polynomial held at the edge has a kink there that keeps a
+    /// controller's inverse from converging for points on the edge; within the short fade it extrapolates
+    /// little.
+    pub fn weight(&self, q: &[f64], inputs: &[f64]) -> f64 {
         if self.is_empty() {
-            return (qc, ic, 1.0);
+            return 1.0;
         }
-        let beyond = distance(q, &qc) / FADE_RAD;
-        let beyond_inputs = inputs
-            .iter()
-            .zip(&ic)
-            .zip(self.input_min.iter().zip(&self.input_max))
-            .map(|((v, c), (lo, hi))| {
-                (v - c).abs() / (FADE_INPUT * (hi - lo)).max(f64::MIN_POSITIVE)
+        // `distance(q, clamp_joints(q))`, without building the clamped vector.
+        let clamped = |v: &[f64], lo: &[f64], hi: &[f64], k: usize| {
+            if lo.len() == v.len() {
+                v[k].clamp(lo[k], hi[k])
+            } else {
+                v[k]
+            }
+        };
+        let beyond = (0..q.len())
+            .map(|k| (q[k] - clamped(q, &self.joint_min, &self.joint_max, k)).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            / FADE_RAD;
+        let beyond_inputs = (0..inputs.len().min(self.input_min.len()))
+            .map(|k| {
+                let c = clamped(inputs, &self.input_min, &self.input_max, k);
+                (inputs[k] - c).abs()
+                    / (FADE_INPUT * (self.input_max[k] - self.input_min[k])).max(f64::MIN_POSITIVE)
             })
             .fold(0.0, f64::max);
-        let far = if self.sample.is_empty() || self.radius_rad <= 0.0 {
+        // Within the radius of some sampled configuration (d − r ≤ 0), the distance adds nothing.
+        let far = if self.sample.is_empty()
+            || self.radius_rad <= 0.0
+            || self.within(q, self.radius_rad)
+        {
             0.0
         } else {
             (self.distance(q) - self.radius_rad).max(0.0) / (0.25 * self.radius_rad)
         };
-        let w = (1.0 - beyond.max(beyond_inputs).max(far)).clamp(0.0, 1.0);
-        // Evaluated at the point itself, not at the edge: a polynomial held at the edge has a kink there
-        // that keeps a controller's inverse from converging for points on the edge; within the short fade
-        // it extrapolates little.
-        (q.to_vec(), inputs.to_vec(), w)
+        (1.0 - beyond.max(beyond_inputs).max(far)).clamp(0.0, 1.0)
+    }
+
+    /// Whether some sampled training configuration lies within `radius` (rad) of `q`.
+    fn within(&self, q: &[f64], radius: f64) -> bool {
+        self.sample.iter().any(|s| distance(s, q) <= radius)
     }
 
     /// Joint-space distance (rad) to the nearest sampled training configuration.
     pub fn distance(&self, q: &[f64]) -> f64 {
-        self.sample
-            .iter()
-            .map(|s| distance(s, q))
-            .fold(f64::INFINITY, f64::min)
+        nearest(&self.sample, q, None)
     }
 
     /// No domain recorded (a model saved before domains were).
@@ -214,6 +224,39 @@ impl Domain {
     }
 }
 
+/// The distance from `q` to the nearest of `sample` (but `skip`), ∞ without any.
+fn nearest(sample: &[Vec<f64>], q: &[f64], skip: Option<usize>) -> f64 {
+    let others = || {
+        sample
+            .iter()
+            .enumerate()
+            .filter(move |(k, _)| Some(*k) != skip)
+    };
+    if q.is_empty() {
+        return others()
+            .map(|(_, s)| distance(s, q))
+            .fold(f64::INFINITY, f64::min);
+    }
+    // The nearest by its sum of squares (the square root is monotone, so the minimum is the same); a partial
+    // sum above the best so far can only grow (its terms are ≥ 0), so the rest of it is skipped.
+    let mut best = f64::INFINITY;
+    for (_, s) in others() {
+        let mut terms = s.iter().zip(q).map(|(x, y)| (x - y).powi(2));
+        let Some(mut sum) = terms.next() else {
+            best = best.min(0.0);
+            continue;
+        };
+        for t in terms {
+            if sum > best {
+                break;
+            }
+            sum += t;
+        }
+        best = best.min(sum);
+    }
+    best.sqrt()
+}
+
 fn distance(a: &[f64], b: &[f64]) -> f64 {
     a.iter()
         .zip(b)
@@ -230,4 +273,76 @@ fn clamp(v: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
         .zip(lo.iter().zip(hi))
         .map(|(x, (a, b))| x.clamp(*a, *b))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The weight as first written: every sampled configuration's distance, the clamped vectors built.
+    fn weight_by_definition(d: &Domain, q: &[f64], inputs: &[f64]) -> f64 {
+        let (qc, ic) = (d.clamp_joints(q), d.clamp_inputs(inputs));
+        let beyond = distance(q, &qc) / FADE_RAD;
+        let beyond_inputs = inputs
+            .iter()
+            .zip(&ic)
+            .zip(d.input_min.iter().zip(&d.input_max))
+            .map(|((v, c), (lo, hi))| {
+                (v - c).abs() / (FADE_INPUT * (hi - lo)).max(f64::MIN_POSITIVE)
+            })
+            .fold(0.0, f64::max);
+        let nearest = d
+            .sample
+            .iter()
+            .map(|s| distance(s, q))
+            .fold(f64::INFINITY, f64::min);
+        let far = (nearest - d.radius_rad).max(0.0) / (0.25 * d.radius_rad);
+        (1.0 - beyond.max(beyond_inputs).max(far)).clamp(0.0, 1.0)
+    }
+
+    /// The pruned searches give the brute force's numbers bit for bit, inside, in the fade and far outside.
+    #[test]
+    fn pruned_distance_and_weight_equal_the_brute_force() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let sample: Vec<Vec<f64>> = (0..300)
+            .map(|_| (0..6).map(|_| rng.random_range(-1.0..1.0)).collect())
+            .collect();
+        let d = Domain {
+            joint_min: vec![-1.0; 6],
+            joint_max: vec![1.0; 6],
+            input_names: vec!["temperature".into()],
+            input_min: vec![20.0],
+            input_max: vec![30.0],
+            sample: sample.clone(),
+            radius_rad: 0.6,
+        };
+        let mut faded = 0;
+        for _ in 0..2000 {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-1.6..1.6)).collect();
+            let t = [rng.random_range(18.0..32.0)];
+            let brute = sample
+                .iter()
+                .map(|s| distance(s, &q))
+                .fold(f64::INFINITY, f64::min);
+            assert_eq!(d.distance(&q).to_bits(), brute.to_bits());
+            let w = d.weight(&q, &t);
+            assert_eq!(w.to_bits(), weight_by_definition(&d, &q, &t).to_bits());
+            faded += usize::from(w > 0.0 && w < 1.0);
+        }
+        assert!(faded > 50, "{faded} points in the fade");
+        let spacing = (0..sample.len())
+            .map(|i| {
+                (0..sample.len())
+                    .filter(|&k| k != i)
+                    .map(|k| distance(&sample[i], &sample[k]))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max);
+        let pruned = (0..sample.len())
+            .map(|i| nearest(&sample, &sample[i], Some(i)))
+            .fold(0.0, f64::max);
+        assert_eq!(pruned.to_bits(), spacing.to_bits());
+    }
 }

@@ -149,8 +149,17 @@ pub fn error_jacobian(
     point: &Point3<f64>,
     params: &[ErrorParam],
 ) -> Matrix6xX<f64> {
+    error_jacobian_on(dh, &dh.frames(q), point, params)
+}
+
+/// [`error_jacobian`] on the DH frames of the configuration (`dh.frames(q)`), which a caller may need too.
+pub fn error_jacobian_on(
+    dh: &DhChain,
+    frames: &[Isometry3<f64>],
+    point: &Point3<f64>,
+    params: &[ErrorParam],
+) -> Matrix6xX<f64> {
     let n = dh.dof();
-    let frames = dh.frames(q);
     let p = frames[n] * dh.tool * point;
     let mut j = Matrix6xX::zeros(params.len());
     for (c, prm) in params.iter().enumerate() {

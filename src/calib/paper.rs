@@ -10,17 +10,17 @@
 //! 4. Predict: the modelled `E_i` go into the full kinematics (eq. 6); position from the position parameters,
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
-use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3xX, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::domain::Domain;
 use super::error_model::{
-    ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, flange_pose_with_errors, frame_errors,
-    select_params,
+    ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, error_jacobian_on,
+    flange_pose_with_errors, frame_errors, select_params,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
-use super::regression::{RegressionOptions, RidgeModel, fit_all, r2};
+use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -255,12 +255,13 @@ impl PaperModel {
         );
         let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
         let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
-        let (x_train, x_val) = (
+        // Position and orientation parameters regress on the same candidates.
+        let mut candidates = Candidates::new(
             model.candidate_matrix(&obs_train),
             model.candidate_matrix(&obs_val),
         );
-        let regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
-            regress(params, &x_train, &x_val, y_train, y_val, &ctx.regression)
+        let mut regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
+            regress(params, &mut candidates, y_train, y_val, &ctx.regression)
         };
         model.position = regress(&selection.position, &id_train.position, &id_val.position)?;
         model.orientation = regress(
@@ -374,7 +375,12 @@ impl PaperModel {
     /// `inputs`: the extra inputs in `extra_inputs` order; any other length (empty) stands for their
     /// training means.
     fn candidates_of(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
-        let tcp = self.basis.dh.flange_pose(q) * self.basis.registration.frame.mounting;
+        self.candidates_at(q, inputs, &self.basis.dh.flange_pose(q))
+    }
+
+    /// [`PaperModel::candidates_of`] with the nominal flange pose at `q` given.
+    fn candidates_at(&self, q: &[f64], inputs: &[f64], flange: &Isometry3<f64>) -> Vec<f64> {
+        let tcp = flange * self.basis.registration.frame.mounting;
         let extra = if inputs.len() == self.extra_inputs.len() {
             inputs
         } else {
@@ -393,14 +399,27 @@ impl PaperModel {
     }
 
     /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
-    /// Outside the training domain the regressions are evaluated as [`Domain::regression_inputs`] says.
+    /// Outside the training domain the regressions are weighted as [`Domain::weight`] says.
     pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
         // `nominal` has no parameter: nothing to place in the domain or regress.
         if self.position.is_empty() && self.orientation.is_empty() {
             return (Vec::new(), Vec::new());
         }
-        let (q, inputs, w) = self.basis.domain.regression_inputs(q, inputs);
-        let x = self.candidates_of(&q, &inputs);
+        self.parameters_at(q, inputs, &self.basis.dh.flange_pose(q))
+    }
+
+    /// [`PaperModel::parameters_with`] with the nominal flange pose at `q` given.
+    fn parameters_at(
+        &self,
+        q: &[f64],
+        inputs: &[f64],
+        flange: &Isometry3<f64>,
+    ) -> (Vec<f64>, Vec<f64>) {
+        if self.position.is_empty() && self.orientation.is_empty() {
+            return (Vec::new(), Vec::new());
+        }
+        let w = self.basis.domain.weight(q, inputs);
+        let x = self.candidates_at(q, inputs, flange);
         // Weight 1 leaves the bits alone.
         let eval = |models: &[ParameterModel]| {
             models
@@ -423,26 +442,29 @@ impl PaperModel {
 
     /// Predicted measured point and flange orientation for configuration `q` and extra inputs `inputs`.
     fn prediction(&self, q: &[f64], inputs: &[f64]) -> Prediction {
-        let (ep, eo) = self.parameters_with(q, inputs);
-        let nominal = self.basis.dh.flange_pose(q);
-        let position = flange_pose_with_errors(
-            &self.basis.dh,
-            q,
-            &self.frame_errors_of(&self.position, &ep),
-        ) * self.basis.registration.frame.mounting;
-        let orientation = flange_pose_with_errors(
-            &self.basis.dh,
-            q,
-            &self.frame_errors_of(&self.orientation, &eo),
-        )
-        .rotation;
+        let dh = &self.basis.dh;
+        // One pass over the chain for the nominal pose and the Jacobian's frames (`flange_pose` multiplies
+        // the same links in the same order).
+        let frames = dh.frames(q);
+        let nominal = frames[dh.dof()] * dh.tool;
+        let (ep, eo) = self.parameters_at(q, inputs, &nominal);
+        // Without parameters the chain with errors is the nominal one, bit for bit (zero rows are skipped).
+        let with_errors = |models: &[ParameterModel], values: &[f64]| {
+            if models.is_empty() {
+                nominal
+            } else {
+                flange_pose_with_errors(dh, q, &self.frame_errors_of(models, values))
+            }
+        };
+        let position = with_errors(&self.position, &ep) * self.basis.registration.frame.mounting;
+        let orientation = with_errors(&self.orientation, &eo).rotation;
         let linearized_position = if self.position.is_empty() {
             nominal * self.basis.registration.frame.mounting
         } else {
             let params: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
-            let j = error_jacobian(
-                &self.basis.dh,
-                q,
+            let j = error_jacobian_on(
+                dh,
+                &frames,
                 &self.basis.registration.frame.mounting,
                 &params,
             );
@@ -473,12 +495,11 @@ fn check_identifiable(kind: ErrorModelKind, n_train: usize, n_params: usize) -> 
     Ok(())
 }
 
-/// One ridge model per parameter of `params`, on the candidate rows `x_train` (chosen on `x_val`); the rows
-/// of `y_train` and `y_val` hold the parameters' identified values per point.
+/// One ridge model per parameter of `params`, on the training candidate rows (chosen on the validation
+/// rows); the rows of `y_train` and `y_val` hold the parameters' identified values per point.
 fn regress(
     params: &[ErrorParam],
-    x_train: &DMatrix<f64>,
-    x_val: &DMatrix<f64>,
+    candidates: &mut Candidates,
     y_train: &[Vec<f64>],
     y_val: &[Vec<f64>],
     opts: &RegressionOptions,
@@ -488,7 +509,7 @@ fn regress(
     }
     let to_matrix =
         |rows: &[Vec<f64>]| DMatrix::from_fn(rows.len(), params.len(), |r, c| rows[r][c]);
-    let fitted = fit_all(x_train, &to_matrix(y_train), x_val, &to_matrix(y_val), opts)?;
+    let fitted = candidates.fit(&to_matrix(y_train), &to_matrix(y_val), opts)?;
     Ok(params
         .iter()
         .zip(fitted)
@@ -549,12 +570,18 @@ impl Fitted for PaperModel {
     /// Without orientation parameters the flange turns as the position parameters turn it (their frames are
     /// rigid), so a point elsewhere on the flange moves with them.
     fn predicted_flange(&self, q: &[f64], inputs: &[f64]) -> nalgebra::Isometry3<f64> {
-        let (ep, eo) = self.parameters_with(q, inputs);
-        let position = flange_pose_with_errors(
-            &self.basis.dh,
-            q,
-            &self.frame_errors_of(&self.position, &ep),
-        );
+        let nominal = self.basis.dh.flange_pose(q);
+        let (ep, eo) = self.parameters_at(q, inputs, &nominal);
+        // Without position parameters the chain with errors is the nominal one, bit for bit.
+        let position = if self.position.is_empty() {
+            nominal
+        } else {
+            flange_pose_with_errors(
+                &self.basis.dh,
+                q,
+                &self.frame_errors_of(&self.position, &ep),
+            )
+        };
         if self.orientation.is_empty() {
             return position;
         }

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 pub use super::correction::{ComponentModel, ResidualCorrection};
-use super::correction::{Reference, mean};
+use super::correction::{Reference, ResidualSetup, mean};
 use super::domain::Domain;
 use super::kinematic::{ELASTIC, KINEMATIC};
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
@@ -176,17 +176,33 @@ impl ResidualModel {
             };
         let extra_inputs = train.extra_input_names().to_vec();
         let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| ctx.dh.flange_pose(q)).collect();
+        // The rounds refit on the same points: their candidate rows, domain and nominal flange poses are the
+        // same every round; only the registration moves.
+        let domain = Domain::of(train, val);
+        let mut setup: Option<ResidualSetup> = None;
         let mut best: Option<(f64, ResidualModel)> = None;
         let mut stalled = 0;
         for _ in 0..REGISTRATION_ROUNDS {
             let (obs_train, obs_val) = (registration.observe(train)?, registration.observe(val)?);
-            let reference = |q: &[f64]| nominal_reference(ctx.dh, &registration, q);
-            let residual = ResidualCorrection::fit(
-                &train.joint_names,
-                &extra_inputs,
-                &reference,
-                &obs_train,
-                &obs_val,
+            let setup = match &mut setup {
+                Some(s) => s,
+                None => setup.insert(ResidualSetup::new(
+                    &train.joint_names,
+                    &extra_inputs,
+                    &obs_train,
+                    &obs_val,
+                )?),
+            };
+            // `nominal_reference` of each point, from its flange pose computed once.
+            let refs: Vec<Reference> = flanges
+                .iter()
+                .map(|f| (f * registration.frame.mounting, f.rotation))
+                .collect();
+            let (refs_train, refs_val) = refs.split_at(train.len());
+            let residual = ResidualCorrection::fit_prepared(
+                setup,
+                (&obs_train, refs_train),
+                (&obs_val, refs_val),
                 registration.measures_orientation(),
                 &ctx.regression,
             )?;
@@ -195,15 +211,16 @@ impl ResidualModel {
                     joint_names: train.joint_names.clone(),
                     dh: ctx.dh.clone(),
                     registration: registration.clone(),
-                    domain: Domain::of(train, val),
+                    domain: domain.clone(),
                 },
                 residual,
             };
-            let error = mean(
-                obs_val
-                    .iter()
-                    .map(|o| (o.position - model.predict_with(&o.q, &o.inputs).position).norm()),
-            );
+            // `predict_with`'s position, on the references above.
+            let error = mean(obs_val.iter().zip(refs_val).map(|(o, r)| {
+                let w = model.basis.domain.weight(&o.q, &o.inputs);
+                let ((position, _), _) = model.residual.apply_with_offset(&o.q, &o.inputs, r, w);
+                (o.position - position).norm()
+            }));
             // Register again onto the nominal points plus this round's modelled residual.
             let shifted: Vec<Isometry3<f64>> = flanges
                 .iter()
@@ -271,12 +288,12 @@ impl Fitted for ResidualModel {
         true
     }
 
-    /// Outside the training domain the residual is evaluated as [`Domain::regression_inputs`] says.
+    /// Outside the training domain the residual is weighted as [`Domain::weight`] says.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
-        let (qc, ic, w) = self.basis.domain.regression_inputs(q, inputs);
+        let w = self.basis.domain.weight(q, inputs);
         let ((position, orientation), _) =
             self.residual
-                .apply_with_offset(&qc, &ic, &self.reference(q), w);
+                .apply_with_offset(q, inputs, &self.reference(q), w);
         Prediction {
             position,
             linearized_position: position,
@@ -427,11 +444,11 @@ impl Fitted for HybridFitted {
     /// inputs go to the residual model.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let p = self.base.predict(q);
-        let (qc, ic, w) = self.basis().domain.regression_inputs(q, inputs);
+        let w = self.basis().domain.weight(q, inputs);
         let ((position, orientation), dp) =
             self.saved
                 .residual
-                .apply_with_offset(&qc, &ic, &(p.position, p.orientation), w);
+                .apply_with_offset(q, inputs, &(p.position, p.orientation), w);
         Prediction {
             position,
             linearized_position: p.linearized_position + dp,

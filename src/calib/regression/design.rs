@@ -2,7 +2,9 @@
 //! largest degree and their Gram matrices), the sums one target adds ([`Target`]), and the solve of one
 //! structure on sub-blocks of the Grams ([`Block`]); see the module notes of `regression`.
 
-use nalgebra::{DMatrix, DVector};
+use std::collections::HashMap;
+
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
 use super::model::RidgeModel;
 use super::stats::{r2_from_sums, standardization, zero_sum_tol};
@@ -106,16 +108,24 @@ impl Design {
         w: &DVector<f64>,
     ) -> Vec<f64> {
         let idx = self.feature_indices(inputs, degree);
-        (0..self.f_val.nrows())
-            .map(|r| {
-                target.r[r]
-                    - idx
-                        .iter()
-                        .zip(w.iter())
-                        .map(|(&j, w)| self.f_val[(r, j)] * w)
-                        .sum::<f64>()
-            })
-            .collect()
+        // Column by column (contiguous), each row's sum in feature order as a row-wise sum would take it.
+        let rows = self.f_val.nrows();
+        let column = |j: usize| &self.f_val.as_slice()[j * rows..(j + 1) * rows];
+        let mut fitted = vec![0.0; rows];
+        for (k, (&j, &wj)) in idx.iter().zip(w.iter()).enumerate() {
+            if k == 0 {
+                fitted
+                    .iter_mut()
+                    .zip(column(j))
+                    .for_each(|(a, f)| *a = f * wj);
+            } else {
+                fitted
+                    .iter_mut()
+                    .zip(column(j))
+                    .for_each(|(a, f)| *a += f * wj);
+            }
+        }
+        target.r.iter().zip(fitted).map(|(r, f)| r - f).collect()
     }
 
     /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.
@@ -262,6 +272,100 @@ impl Block {
         };
         let sse = target.rr - 2.0 * w.dot(&self.cv) + w.dot(&(&self.gv * &w));
         (w, sse.max(0.0))
+    }
+
+    /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole.
+    /// The leading block of a Cholesky factor is the factor of the leading block, and nalgebra computes it by
+    /// the same operations in the same order (its factorization goes column by column, each entry from the
+    /// columns before it; the forward substitution and the matrix–vector product work entry by entry), so
+    /// each solution is bit for bit the one of the sub-block alone. Where the whole does not factor (collinear
+    /// features at α ≈ 0), each sub-block is solved on its own.
+    /// `factor`: [`Block::factor`] at `alpha`.
+    pub(super) fn solve_leading(
+        &self,
+        target: &Target,
+        alpha: f64,
+        sizes: &[usize],
+        factor: Option<&Cholesky<f64, Dyn>>,
+    ) -> Vec<(DVector<f64>, f64)> {
+        let Some(ch) = factor else {
+            return sizes
+                .iter()
+                .map(|&m| self.leading(m).solve(target, alpha))
+                .collect();
+        };
+        // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
+        let mut forward = self.b.clone();
+        ch.l_dirty()
+            .solve_lower_triangular_unchecked_mut(&mut forward);
+        sizes
+            .iter()
+            .map(|&m| {
+                let l = ch.l_dirty().view((0, 0), (m, m));
+                let mut w = forward.rows(0, m).clone_owned();
+                l.ad_solve_lower_triangular_unchecked_mut(&mut w);
+                let gw = self.gv.view((0, 0), (m, m)) * &w;
+                let sse = target.rr - 2.0 * w.dot(&self.cv.rows(0, m)) + w.dot(&gw);
+                (w, sse.max(0.0))
+            })
+            .collect()
+    }
+
+    /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal; `None` where it does not
+    /// factor.
+    pub(super) fn factor(&self, alpha: f64) -> Option<Cholesky<f64, Dyn>> {
+        let mut a = self.g.clone();
+        for i in 0..a.nrows() {
+            a[(i, i)] += alpha;
+        }
+        a.cholesky()
+    }
+
+    /// The block of the first `m` features.
+    fn leading(&self, m: usize) -> Block {
+        Block {
+            g: self.g.view((0, 0), (m, m)).clone_owned(),
+            gv: self.gv.view((0, 0), (m, m)).clone_owned(),
+            b: self.b.rows(0, m).clone_owned(),
+            cv: self.cv.rows(0, m).clone_owned(),
+        }
+    }
+}
+
+type Factor = Cholesky<f64, Dyn>;
+
+/// [`Block::factor`]s kept from one fit to the next on the same design: a factor depends on the features and
+/// α, not on the target, and `residual-ridge`'s rounds search the same structures on new residuals. Those the
+/// latest fit did not use are dropped, so it holds at most one fit's worth.
+#[derive(Default)]
+pub(super) struct Factors {
+    /// By feature columns and α's bits: the factor and the fit that last used it.
+    map: HashMap<(Vec<usize>, u64), (Option<Factor>, u64)>,
+    fit: u64,
+}
+
+impl Factors {
+    /// The factor of `block` (on features `idx`) at `alpha`, computed on first use.
+    pub(super) fn get(
+        &mut self,
+        block: &Block,
+        idx: &[usize],
+        alpha: f64,
+    ) -> Option<&Cholesky<f64, Dyn>> {
+        let fit = self.fit;
+        let entry = self
+            .map
+            .entry((idx.to_vec(), alpha.to_bits()))
+            .or_insert_with(|| (block.factor(alpha), fit));
+        entry.1 = fit;
+        entry.0.as_ref()
+    }
+
+    /// Ends a fit: drops what it did not use.
+    pub(super) fn finish_fit(&mut self) {
+        let fit = self.fit;
+        self.map.retain(|_, (_, used)| *used == fit);
+        self.fit += 1;
     }
 }
 

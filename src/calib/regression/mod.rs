@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use design::{Block, Design, Target, build};
+use design::{Block, Design, Factors, Target, build};
 pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
 pub use stats::r2;
 
@@ -92,21 +92,80 @@ pub fn fit_all(
     y_val: &DMatrix<f64>,
     opts: &RegressionOptions,
 ) -> Result<Vec<RidgeModel>> {
-    check_inputs(x_train, y_train, x_val, y_val, opts)?;
-    let n = x_train.nrows();
-    let design = Design::new(x_train, x_val, opts.max_degree, opts.cross_terms)?;
-    let mut alphas = opts.alphas.clone();
-    alphas.sort_by(|a, b| b.total_cmp(a));
-    alphas.dedup();
-    y_train
-        .column_iter()
-        .zip(y_val.column_iter())
-        .map(|(y, yv)| {
-            let y: Vec<f64> = y.iter().copied().collect();
-            let yv: Vec<f64> = yv.iter().copied().collect();
-            fit_one(&design, &Target::new(&design, &y, &yv), n, &alphas, opts)
-        })
-        .collect()
+    Candidates::new(x_train.clone(), x_val.clone()).fit(y_train, y_val, opts)
+}
+
+/// The candidate rows of [`fit_all`] kept for several calls on the same rows: their standardized features and
+/// Gram matrices are built once, on the first fit (`residual-ridge` refits its residual on the same joint
+/// angles every registration round, the paper's method its position and orientation parameters on the same
+/// candidates). Each [`Candidates::fit`] gives what `fit_all` gives on the same arguments.
+pub struct Candidates {
+    x_train: DMatrix<f64>,
+    x_val: DMatrix<f64>,
+    /// The design and the (`max_degree`, `cross_terms`) it was built for.
+    design: Option<((usize, bool), Design)>,
+    /// Factorizations kept for the next fit ([`Candidates::keeping_factors`]).
+    factors: Option<Factors>,
+}
+
+impl Candidates {
+    pub fn new(x_train: DMatrix<f64>, x_val: DMatrix<f64>) -> Candidates {
+        Candidates {
+            x_train,
+            x_val,
+            design: None,
+            factors: None,
+        }
+    }
+
+    /// Keeps each fit's factorizations for the next (at most one fit's worth: up to the α grid's length ×
+    /// `max_degree` × the targets' distinct input rankings matrices of at most 5 × candidates features
+    /// squared), for fits that search the same structures again: the same numbers, each factorization done
+    /// once.
+    pub fn keeping_factors(mut self) -> Candidates {
+        self.factors = Some(Factors::default());
+        self
+    }
+
+    /// [`fit_all`] on these candidate rows.
+    pub fn fit(
+        &mut self,
+        y_train: &DMatrix<f64>,
+        y_val: &DMatrix<f64>,
+        opts: &RegressionOptions,
+    ) -> Result<Vec<RidgeModel>> {
+        check_inputs(&self.x_train, y_train, &self.x_val, y_val, opts)?;
+        let n = self.x_train.nrows();
+        let key = (opts.max_degree, opts.cross_terms);
+        let design = match &mut self.design {
+            Some((k, design)) if *k == key => design,
+            slot => {
+                let design = Design::new(&self.x_train, &self.x_val, key.0, key.1)?;
+                if let Some(f) = &mut self.factors {
+                    *f = Factors::default();
+                }
+                &mut slot.insert((key, design)).1
+            }
+        };
+        let mut alphas = opts.alphas.clone();
+        alphas.sort_by(|a, b| b.total_cmp(a));
+        alphas.dedup();
+        let factors = &mut self.factors;
+        let models = y_train
+            .column_iter()
+            .zip(y_val.column_iter())
+            .map(|(y, yv)| {
+                let y: Vec<f64> = y.iter().copied().collect();
+                let yv: Vec<f64> = yv.iter().copied().collect();
+                let target = Target::new(design, &y, &yv);
+                fit_one(design, &target, n, &alphas, opts, factors.as_mut())
+            })
+            .collect();
+        if let Some(f) = factors {
+            f.finish_fit();
+        }
+        models
+    }
 }
 
 fn check_inputs(
@@ -190,6 +249,7 @@ fn fit_one(
     n: usize,
     alphas: &[f64],
     opts: &RegressionOptions,
+    factors: Option<&mut Factors>,
 ) -> Result<RidgeModel> {
     let intercept_only = || build(design, target, &[], 0, 0.0, &DVector::zeros(0), target.rr);
     if target.constant {
@@ -199,7 +259,7 @@ fn fit_one(
     if order.is_empty() {
         return Ok(intercept_only());
     }
-    let fitted = fit_structures(design, target, &order, n, alphas);
+    let fitted = fit_structures(design, target, &order, n, alphas, factors);
     let choice = choose(design, target, fitted, n, opts.parsimony_z)?;
     Ok(build(
         design,
@@ -214,35 +274,64 @@ fn fit_one(
 
 /// Every structure (the top k of `order` at each degree) that `n` training points can fit, each with the α
 /// that gives the lowest validation SSE.
+///
+/// Without cross terms the features of the top k inputs at a degree are the leading ones of the top k + 1's
+/// ([`Design::feature_indices`] lists them input by input), so one factorization per degree and α serves every
+/// k ([`Block::solve_leading`]); with cross terms the products of a new input fall among the old ones', and
+/// each structure is solved on its own.
 fn fit_structures(
     design: &Design,
     target: &Target,
     order: &[usize],
     n: usize,
     alphas: &[f64],
+    mut factors: Option<&mut Factors>,
 ) -> Vec<RidgeFit> {
     let mut fitted = Vec::new();
-    for k in 1..=order.len() {
-        for degree in 1..=design.max_degree {
-            let inputs = &order[..k];
-            let idx = design.feature_indices(inputs, degree);
-            if idx.len() + 1 > n {
-                continue;
-            }
-            let block = Block::new(design, target, &idx);
-            // α descending, strict improvement: equal scores keep the stronger penalty.
-            let mut best: Option<(f64, DVector<f64>, f64)> = None;
-            for &alpha in alphas {
-                let (w, sse) = block.solve(target, alpha);
-                if best.as_ref().is_none_or(|b| sse < b.2) {
-                    best = Some((alpha, w, sse));
+    for degree in 1..=design.max_degree {
+        // The feature count grows with k: the structures `n` points can fit are the first few.
+        let idx: Vec<Vec<usize>> = (1..=order.len())
+            .map(|k| design.feature_indices(&order[..k], degree))
+            .take_while(|idx| idx.len() < n)
+            .collect();
+        let Some(largest) = idx.last() else {
+            continue;
+        };
+        let sizes: Vec<usize> = idx.iter().map(Vec::len).collect();
+        let nested = idx.iter().all(|i| largest.starts_with(i));
+        let blocks: Vec<Block> = if nested {
+            vec![Block::new(design, target, largest)]
+        } else {
+            idx.iter().map(|i| Block::new(design, target, i)).collect()
+        };
+        // α descending, strict improvement: equal scores keep the stronger penalty.
+        let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
+        for &alpha in alphas {
+            let solutions = if nested {
+                let own;
+                let factor = match factors.as_deref_mut() {
+                    Some(f) => f.get(&blocks[0], largest, alpha),
+                    None => {
+                        own = blocks[0].factor(alpha);
+                        own.as_ref()
+                    }
+                };
+                blocks[0].solve_leading(target, alpha, &sizes, factor)
+            } else {
+                blocks.iter().map(|b| b.solve(target, alpha)).collect()
+            };
+            for (b, (w, sse)) in best.iter_mut().zip(solutions) {
+                if b.as_ref().is_none_or(|b| sse < b.2) {
+                    *b = Some((alpha, w, sse));
                 }
             }
-            let (alpha, w, sse) = best.expect("alphas is non-empty");
+        }
+        for (k, (b, size)) in best.into_iter().zip(sizes).enumerate() {
+            let (alpha, w, sse) = b.expect("alphas is non-empty");
             fitted.push(RidgeFit {
-                inputs: inputs.to_vec(),
+                inputs: order[..=k].to_vec(),
                 degree,
-                n_features: idx.len(),
+                n_features: size,
                 alpha,
                 w,
                 sse,
@@ -503,6 +592,44 @@ mod tests {
         );
         let pred: Vec<f64> = (0..xv.nrows()).map(|r| m.predict(&row(&xv, r))).collect();
         assert!((m.validation_r2 - r2(&y_val, &pred)).abs() < 1e-9);
+    }
+
+    /// One factorization per degree and α serves every nested input set: each leading solve equals the solve
+    /// of its block alone bit for bit, and fits that keep their factorizations give `fit_all`'s models.
+    #[test]
+    fn leading_solves_equal_each_block_alone() {
+        let (xt, yt) = poly_data(13, 300);
+        let (xv, yv) = poly_data(14, 150);
+        let (y, y_val): (Vec<f64>, Vec<f64>) =
+            (yt.iter().copied().collect(), yv.iter().copied().collect());
+        let design = Design::new(&xt, &xv, 5, false).unwrap();
+        let target = Target::new(&design, &y, &y_val);
+        let order = [3, 1, 0, 4];
+        for degree in [1, 3, 5] {
+            let idx = design.feature_indices(&order, degree);
+            let block = Block::new(&design, &target, &idx);
+            let sizes: Vec<usize> = (1..=order.len()).map(|k| k * degree).collect();
+            for alpha in [0.0, 1e-8, 1e-2, 30.0] {
+                let leading =
+                    block.solve_leading(&target, alpha, &sizes, block.factor(alpha).as_ref());
+                for (k, (w, sse)) in leading.iter().enumerate() {
+                    let alone = Block::new(&design, &target, &idx[..sizes[k]]);
+                    let (w1, sse1) = alone.solve(&target, alpha);
+                    assert_eq!(
+                        sse.to_bits(),
+                        sse1.to_bits(),
+                        "degree {degree}, α {alpha}, k {k}"
+                    );
+                    assert!(w.iter().zip(&w1).all(|(a, b)| a.to_bits() == b.to_bits()));
+                }
+            }
+        }
+        let opts = RegressionOptions::default();
+        let mut kept = Candidates::new(xt.clone(), xv.clone()).keeping_factors();
+        let want = fit_all(&xt, &yt, &xv, &yv, &opts).unwrap();
+        for _ in 0..2 {
+            assert_eq!(kept.fit(&yt, &yv, &opts).unwrap(), want);
+        }
     }
 
     #[test]
