@@ -16,8 +16,8 @@ use serde_json::json;
 
 use super::domain::Domain;
 use super::error_model::{
-    ErrorModelKind, ErrorParam, FrameErrors, error_jacobian, error_jacobian_on,
-    flange_pose_with_errors, frame_errors, select_params,
+    ErrorModelKind, ErrorParam, FrameErrors, error_jacobian_on, flange_pose_with_errors,
+    frame_errors, select_params,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
@@ -255,11 +255,13 @@ impl PaperModel {
         );
         let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
         let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
-        // Position and orientation parameters regress on the same candidates.
+        // Position and orientation parameters regress on the same candidates, and parameters with the same
+        // ranking of the candidates on the same structures.
         let mut candidates = Candidates::new(
             model.candidate_matrix(&obs_train),
             model.candidate_matrix(&obs_val),
-        );
+        )
+        .keeping_factors();
         let mut regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
             regress(params, &mut candidates, y_train, y_val, &ctx.regression)
         };
@@ -333,12 +335,15 @@ impl PaperModel {
             position: Vec::with_capacity(observations.len()),
             orientation: Vec::with_capacity(observations.len()),
         };
+        let dh = &self.basis.dh;
         for o in observations {
-            let flange = self.basis.dh.flange_pose(&o.q);
+            // One pass over the chain for the flange pose and the Jacobians' frames.
+            let frames = dh.frames(&o.q);
+            let flange = frames[dh.dof()] * dh.tool;
             if !position_params.is_empty() {
-                let j = error_jacobian(
-                    &self.basis.dh,
-                    &o.q,
+                let j = error_jacobian_on(
+                    dh,
+                    &frames,
                     &self.basis.registration.frame.mounting,
                     position_params,
                 );
@@ -347,9 +352,9 @@ impl PaperModel {
                     .push(min_norm(j.fixed_rows::<3>(0).into_owned(), dp));
             }
             if let (false, Some(measured)) = (orientation_params.is_empty(), o.orientation) {
-                let j = error_jacobian(
-                    &self.basis.dh,
-                    &o.q,
+                let j = error_jacobian_on(
+                    dh,
+                    &frames,
                     &self.basis.registration.frame.mounting,
                     orientation_params,
                 );

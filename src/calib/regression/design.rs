@@ -80,8 +80,7 @@ impl Design {
             }
             f_val.column_mut(j).apply(|v| *v = (*v - m) / scale);
         }
-        let g_train = f_train.tr_mul(&f_train);
-        let g_val = f_val.tr_mul(&f_val);
+        let (g_train, g_val) = (gram(&f_train), gram(&f_val));
         Ok(Design {
             n_cand: c,
             max_degree,
@@ -367,6 +366,21 @@ impl Factors {
         self.map.retain(|_, (_, used)| *used == fit);
         self.fit += 1;
     }
+}
+
+/// `fᵀf`, each entry below the diagonal the one above: `tr_mul`'s dot product of two columns takes the same
+/// products in the same order whichever comes first.
+fn gram(f: &DMatrix<f64>) -> DMatrix<f64> {
+    let p = f.ncols();
+    let mut g = DMatrix::zeros(p, p);
+    for j in 0..p {
+        for i in 0..=j {
+            let v = f.column(i).dot(&f.column(j));
+            g[(i, j)] = v;
+            g[(j, i)] = v;
+        }
+    }
+    g
 }
 
 /// The polynomial features of `x`'s rows, standardized inputs to the powers 1..=`max_degree` (column

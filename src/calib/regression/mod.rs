@@ -118,10 +118,11 @@ impl Candidates {
         }
     }
 
-    /// Keeps each fit's factorizations for the next (at most one fit's worth: up to the α grid's length ×
-    /// `max_degree` × the targets' distinct input rankings matrices of at most 5 × candidates features
-    /// squared), for fits that search the same structures again: the same numbers, each factorization done
-    /// once.
+    /// Keeps the factorizations of `G + αI` on each structure searched (they depend on the features and α,
+    /// not on the target) for the targets and fits after, where several targets rank the candidates alike or
+    /// a later fit searches the same structures: the same numbers, each factorization done once. It holds
+    /// one fit's worth (those a fit did not use are dropped at its end): up to the α grid's length ×
+    /// `max_degree` × the targets' distinct rankings, each at most `max_degree` × candidates features square.
     pub fn keeping_factors(mut self) -> Candidates {
         self.factors = Some(Factors::default());
         self
