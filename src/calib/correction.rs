@@ -8,6 +8,8 @@
 //! (position, orientation) whose mean validation error (distance, angle) would grow is dropped as a whole;
 //! so on the validation data the corrected model is never worse than its reference in either measure.
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -348,13 +350,17 @@ impl ResidualCorrection {
 
     /// The candidate row at `q` with extra inputs `inputs` (any other length than the model's, e.g. empty:
     /// their training means).
-    fn row(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
+    fn row<'a>(&self, q: &'a [f64], inputs: &[f64]) -> Cow<'a, [f64]> {
         let extra = if inputs.len() == self.input_means.len() {
             inputs
         } else {
             &self.input_means
         };
-        q.iter().chain(extra).copied().collect()
+        // Without extra inputs the row is the configuration itself.
+        if extra.is_empty() {
+            return Cow::Borrowed(q);
+        }
+        Cow::Owned(q.iter().chain(extra).copied().collect())
     }
 
     /// The modelled position offset and rotation vector at `q` with extra inputs `inputs` (empty: their means).
