@@ -401,7 +401,8 @@ fn cholesky_diagonal<const R: usize>(m: &SMatrix<f64, R, R>) -> Option<[f64; R]>
             }
         }
         let v = l[(j, j)];
-        if v == 0.0 || !(v >= 0.0) {
+        // nalgebra refuses a zero pivot, and one that is negative or NaN (no square root).
+        if v == 0.0 || v.is_nan() || v < 0.0 {
             return None;
         }
         let denom = v.sqrt();
