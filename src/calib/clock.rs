@@ -23,7 +23,7 @@
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3xX, Point3, Vector3};
 
 use super::rigid::centre;
-use super::tracker_frame::fit_tracker_frame;
+use super::tracker_frame::{TrackerFrame, fit_tracker_frame};
 use crate::dataset::{Dataset, JointRates};
 use crate::error::{Error, Result};
 use crate::robot::dh::DhChain;
@@ -45,6 +45,8 @@ struct Timeline<'a> {
     time: &'a [f64],
     /// Row indices sorted by time.
     order: Vec<usize>,
+    /// The measured reflector centres, in row order (they do not move with the shift).
+    centres: Vec<Point3<f64>>,
 }
 
 impl<'a> Timeline<'a> {
@@ -80,7 +82,13 @@ impl<'a> Timeline<'a> {
                 ),
             });
         }
-        Ok(Timeline { data, time, order })
+        let centres = data.measured.iter().map(|m| centre(m)).collect();
+        Ok(Timeline {
+            data,
+            time,
+            order,
+            centres,
+        })
     }
 
     /// Joint readings of every row at its time + `shift`, in row order: the quadratic through the row and its
@@ -142,13 +150,11 @@ impl<'a> Timeline<'a> {
     /// frame and the mounting together with each joint's lost motion (half a band against the direction the
     /// joint moves in, [`crate::truth`]'s model of it).
     fn rms(&self, dh: &DhChain, shift: f64, lost_motion: Option<&LostMotion>) -> Result<f64> {
-        let q = self.shifted(shift);
-        let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| dh.flange_pose(q)).collect();
-        let centres: Vec<Point3<f64>> = self.data.measured.iter().map(|m| centre(m)).collect();
-        let frame = fit_tracker_frame(&centres, &flanges, &Point3::origin())?;
+        let (q, flanges, frame) = self.registration(dh, shift)?;
         let Some(lm) = lost_motion else {
             return Ok(frame.rms);
         };
+        let centres = &self.centres;
         let n = q.len();
         let dof = dh.dof();
         let cols = 9 + dof;
@@ -188,6 +194,20 @@ impl<'a> Timeline<'a> {
     }
 }
 
+impl Timeline<'_> {
+    /// The joint readings shifted by `shift`, their nominal flange poses and the registration of the nominal
+    /// kinematics to the measured centres there.
+    fn registration(&self, dh: &DhChain, shift: f64) -> Result<Shifted> {
+        let q = self.shifted(shift);
+        let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| dh.flange_pose(q)).collect();
+        let frame = fit_tracker_frame(&self.centres, &flanges, &Point3::origin())?;
+        Ok((q, flanges, frame))
+    }
+}
+
+/// What [`Timeline::registration`] gives: readings, flange poses, registration.
+type Shifted = (Vec<Vec<f64>>, Vec<Isometry3<f64>>, TrackerFrame);
+
 /// What the joint lost motion contributes, per row: the position Jacobian of the measured point and the
 /// direction each joint moves in.
 struct LostMotion {
@@ -196,12 +216,9 @@ struct LostMotion {
 }
 
 impl LostMotion {
-    /// Finite-difference Jacobians at the readings shifted by `shift`, for the registration there.
-    fn at(line: &Timeline, dh: &DhChain, shift: f64) -> Result<LostMotion> {
-        let q = line.shifted(shift);
-        let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| dh.flange_pose(q)).collect();
-        let centres: Vec<Point3<f64>> = line.data.measured.iter().map(|m| centre(m)).collect();
-        let mounting = fit_tracker_frame(&centres, &flanges, &Point3::origin())?.mounting;
+    /// Finite-difference Jacobians at the shifted readings `q` of `line`, for the mounting of the registration
+    /// there.
+    fn at(line: &Timeline, dh: &DhChain, q: &[Vec<f64>], mounting: Point3<f64>) -> LostMotion {
         let h = 1e-6;
         let jacobian = q
             .iter()
@@ -219,10 +236,10 @@ impl LostMotion {
                 jac
             })
             .collect();
-        Ok(LostMotion {
+        LostMotion {
             jacobian,
             direction: line.directions(),
-        })
+        }
     }
 }
 
@@ -237,16 +254,30 @@ pub fn estimate(dh: &DhChain, data: &Dataset, bound_s: f64) -> Result<ClockOffse
     const GRID: usize = 40;
     let step = 2.0 * bound_s / GRID as f64;
     let mut best = (f64::INFINITY, 0.0);
+    // The grid's best registration serves the lost motion's Jacobians, and its point at zero (if it has one)
+    // the residual at zero: the same computations, not repeated.
+    let (mut best_q, mut best_mounting, mut at_zero) = (None, None, None);
     for k in 0..=GRID {
         let shift = -bound_s + k as f64 * step;
-        let rms = line.rms(dh, shift, None)?;
-        if rms < best.0 {
-            best = (rms, shift);
+        let (q, _, frame) = line.registration(dh, shift)?;
+        if shift == 0.0 {
+            at_zero = Some(frame.rms);
+        }
+        if frame.rms < best.0 {
+            best = (frame.rms, shift);
+            (best_q, best_mounting) = (Some(q), Some(frame.mounting));
         }
     }
     // Lost motion moves the flange along the direction of motion, as a clock offset does; the two differ in
     // that an offset grows with the speed. Near the coarse minimum both are fitted.
-    let lost = LostMotion::at(&line, dh, best.1)?;
+    let lost = match (best_q, best_mounting) {
+        (Some(q), Some(mounting)) => LostMotion::at(&line, dh, &q, mounting),
+        // No finite residual on the grid: the registration at its first shift, as before.
+        _ => {
+            let (q, _, frame) = line.registration(dh, best.1)?;
+            LostMotion::at(&line, dh, &q, frame.mounting)
+        }
+    };
     let lm = Some(&lost);
     // Golden section in the best cell and its neighbours, to 0.1 µs.
     let (mut a, mut b) = (best.1 - step, best.1 + step);
@@ -268,7 +299,10 @@ pub fn estimate(dh: &DhChain, data: &Dataset, bound_s: f64) -> Result<ClockOffse
     Ok(ClockOffset {
         offset_s,
         rms_m: line.rms(dh, offset_s, None)?,
-        rms_at_zero_m: line.rms(dh, 0.0, None)?,
+        rms_at_zero_m: match at_zero {
+            Some(rms) => rms,
+            None => line.rms(dh, 0.0, None)?,
+        },
     })
 }
 

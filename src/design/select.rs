@@ -157,6 +157,8 @@ struct Search<const R: usize> {
     design: Vec<usize>,
     m_inv: DMatrix<f64>,
     d: Vec<SMatrix<f64, R, R>>,
+    /// Per candidate, the product [`Search::best_outside`] screens with.
+    rank: Vec<f64>,
     since_refresh: usize,
 }
 
@@ -181,6 +183,7 @@ impl<const R: usize> Search<R> {
             design: Vec::new(),
             m_inv: DMatrix::zeros(k, k),
             d: vec![SMatrix::zeros(); a.len()],
+            rank: vec![0.0; a.len()],
             since_refresh: 0,
             a,
         };
@@ -223,10 +226,30 @@ impl<const R: usize> Search<R> {
     }
 
     /// The candidate outside the design whose addition raises ln det most.
-    fn best_outside(&self) -> usize {
+    ///
+    /// The product of the Cholesky diagonal of I + D_c (the same factor, bit for bit, as [`ln_det`]'s) ranks
+    /// the candidates as ln det does up to a few roundings, without R logarithms per candidate; only the
+    /// candidates within [`RANK_SLACK`] of the best product get ln det itself, so the choice (ties to the
+    /// lower index) is the one ln det alone makes.
+    fn best_outside(&mut self) -> usize {
+        let mut top = 0.0_f64;
+        for (c, d) in self.d.iter().enumerate() {
+            let p = if self.in_design[c] {
+                f64::NAN
+            } else {
+                cholesky_diagonal(&(SMatrix::<f64, R, R>::identity() + d))
+                    .map_or(0.0, |l| l.iter().product())
+            };
+            self.rank[c] = p;
+            if p > top {
+                top = p;
+            }
+        }
+        let exact = |c: usize| self.rank[c] >= top * (1.0 - RANK_SLACK);
+        let screened = top.is_finite() && top > 0.0;
         let mut best = (usize::MAX, f64::NEG_INFINITY);
         for (c, d) in self.d.iter().enumerate() {
-            if self.in_design[c] {
+            if self.in_design[c] || (screened && !exact(c)) {
                 continue;
             }
             let g = ln_det(SMatrix::<f64, R, R>::identity() + d);
@@ -275,8 +298,13 @@ impl<const R: usize> Search<R> {
         let u: OMatrix<f64, Dyn, Const<R>> = &self.m_inv * self.a[s].transpose();
         let cu = c_inv * u.transpose();
         self.m_inv -= (&u * cu) * sign;
+        let u_rows = rows_of(&u);
         for (a, d) in self.a.iter().zip(self.d.iter_mut()) {
-            let w: SMatrix<f64, R, R> = a * &u;
+            let w: SMatrix<f64, R, R> = if R <= GEMV_ROWS {
+                product(a.as_slice(), &u_rows)
+            } else {
+                a * &u
+            };
             *d -= w * c_inv * w.transpose() * sign;
         }
         change
@@ -296,10 +324,94 @@ impl<const R: usize> Search<R> {
             // δ > 0 keeps M positive definite; only non-finite input gets here, which d_optimal refuses.
             None => DMatrix::identity(k, k) / self.delta,
         };
+        if R > GEMV_ROWS {
+            for (a, d) in self.a.iter().zip(self.d.iter_mut()) {
+                *d = a * &self.m_inv * a.transpose();
+            }
+            return;
+        }
+        // A · M⁻¹ first, then its product with Aᵀ, in nalgebra's order (see [`product`]).
+        let (mut am, mut at) = (vec![0.0; R * k], vec![[0.0; R]; k]);
         for (a, d) in self.a.iter().zip(self.d.iter_mut()) {
-            *d = a * &self.m_inv * a.transpose();
+            let a = a.as_slice();
+            for (j, column) in self.m_inv.as_slice().chunks_exact(k).enumerate() {
+                let mut acc: [f64; R] = std::array::from_fn(|i| a[i] * column[0]);
+                for (l, m) in column.iter().enumerate().skip(1) {
+                    for (v, ai) in acc.iter_mut().zip(&a[l * R..(l + 1) * R]) {
+                        *v += ai * m;
+                    }
+                }
+                am[j * R..(j + 1) * R].copy_from_slice(&acc);
+            }
+            for (row, column) in at.iter_mut().zip(a.chunks_exact(R)) {
+                row.copy_from_slice(column);
+            }
+            *d = product(&am, &at);
         }
     }
+}
+
+/// Rows per candidate up to which nalgebra multiplies an R × k by a k × R matrix column by column, summing
+/// over k in ascending order (from 6 rows on it hands the product to `matrixmultiply`, whose order differs).
+const GEMV_ROWS: usize = 5;
+
+/// How far below the best determinant a candidate is still ranked by its logarithm (relative): a million
+/// times the roundings that separate the two rankings.
+const RANK_SLACK: f64 = 1e-9;
+
+/// The rows of a k × R matrix, each R values contiguous.
+fn rows_of<const R: usize>(u: &OMatrix<f64, Dyn, Const<R>>) -> Vec<[f64; R]> {
+    (0..u.nrows())
+        .map(|l| std::array::from_fn(|j| u[(l, j)]))
+        .collect()
+}
+
+/// `a · u` for `a` an R × k matrix (column-major: `a[l * R + i]`) and `u` given by its k rows: each entry summed
+/// over l in ascending order from its first product, as nalgebra's product does for R ≤ [`GEMV_ROWS`] — the
+/// same bits, without its per-column views on every candidate of the pool at every update.
+#[inline]
+fn product<const R: usize>(a: &[f64], u_rows: &[[f64; R]]) -> SMatrix<f64, R, R> {
+    let mut w = [[0.0; R]; R];
+    for (i, wi) in w.iter_mut().enumerate() {
+        for (j, v) in wi.iter_mut().enumerate() {
+            *v = a[i] * u_rows[0][j];
+        }
+    }
+    for (l, ul) in u_rows.iter().enumerate().skip(1) {
+        let column = &a[l * R..(l + 1) * R];
+        for (wi, ai) in w.iter_mut().zip(column) {
+            for (v, uj) in wi.iter_mut().zip(ul) {
+                *v += ai * uj;
+            }
+        }
+    }
+    SMatrix::from_fn(|i, j| w[i][j])
+}
+
+/// The diagonal of the Cholesky factor of `m`, computed as nalgebra's `Cholesky::new` does (left-looking,
+/// column by column, the same operations in the same order); `None` where it fails.
+fn cholesky_diagonal<const R: usize>(m: &SMatrix<f64, R, R>) -> Option<[f64; R]> {
+    let mut l = *m;
+    let mut diag = [0.0; R];
+    for j in 0..R {
+        for k in 0..j {
+            let factor = -l[(j, k)];
+            for i in j..R {
+                l[(i, j)] += factor * l[(i, k)];
+            }
+        }
+        let v = l[(j, j)];
+        // nalgebra refuses a zero pivot, and one that is negative or NaN (no square root).
+        if v == 0.0 || v.is_nan() || v < 0.0 {
+            return None;
+        }
+        let denom = v.sqrt();
+        diag[j] = denom;
+        for i in j + 1..R {
+            l[(i, j)] /= denom;
+        }
+    }
+    Some(diag)
 }
 
 #[cfg(test)]
@@ -385,6 +497,50 @@ mod tests {
             let mut with: Vec<usize> = s.design.clone();
             with.push(c);
             assert!((base + gain - logdet(&rows, &with)).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn the_hand_products_are_nalgebras_bit_for_bit() {
+        // The search's choices are compared across commits byte for byte: its own loops must round as
+        // nalgebra's products and Cholesky factor do.
+        let rows = pool(40, 3, 29, 11);
+        let a: Vec<OMatrix<f64, Const<3>, Dyn>> = rows
+            .iter()
+            .map(|m| OMatrix::from_column_slice_generic(Const::<3>, Dyn(29), m.as_slice()))
+            .collect();
+        let u: OMatrix<f64, Dyn, Const<3>> = a[7].transpose() * 0.37 + a[9].transpose();
+        let u_rows = rows_of(&u);
+        for a in &a {
+            let direct: SMatrix<f64, 3, 3> = a * &u;
+            assert_eq!(product(a.as_slice(), &u_rows), direct);
+            let m = SMatrix::<f64, 3, 3>::identity() + direct * direct.transpose();
+            let l = m.cholesky().unwrap().l();
+            assert_eq!(
+                cholesky_diagonal(&m).unwrap(),
+                [l[(0, 0)], l[(1, 1)], l[(2, 2)]]
+            );
+        }
+        let singular = SMatrix::<f64, 3, 3>::from_diagonal(&nalgebra::Vector3::new(1.0, 0.0, 1.0));
+        assert!(cholesky_diagonal(&singular).is_none());
+        // refresh's D_c against nalgebra's A M⁻¹ Aᵀ.
+        let mut s = Search::<3>::new(&rows, &SelectOptions::default());
+        s.design = vec![1, 4, 6, 20, 33];
+        s.refresh();
+        for (a, d) in s.a.iter().zip(&s.d) {
+            assert_eq!(*d, a * &s.m_inv * a.transpose());
+        }
+        // The screened choice is the one ln det makes over every candidate.
+        for _ in 0..5 {
+            let full = (0..rows.len())
+                .filter(|&c| !s.in_design[c])
+                .map(|c| (c, ln_det(SMatrix::<f64, 3, 3>::identity() + s.d[c])))
+                .fold((usize::MAX, f64::NEG_INFINITY), |b, x| {
+                    if x.1 > b.1 { x } else { b }
+                });
+            let best = s.best_outside();
+            assert_eq!(best, full.0);
+            s.update(best, 1.0);
         }
     }
 

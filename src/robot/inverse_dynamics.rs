@@ -22,6 +22,11 @@ pub struct Workspace {
     force: Vec<Vector3<f64>>,
     /// Moment about the body's centre of mass.
     moment: Vec<Vector3<f64>>,
+    /// Each joint's axis and anchor and each body's centre of mass (world): the backward pass reads what the
+    /// forward one computed.
+    axis: Vec<Vector3<f64>>,
+    anchor: Vec<Vector3<f64>>,
+    com: Vec<Vector3<f64>>,
 }
 
 impl Workspace {
@@ -33,6 +38,9 @@ impl Workspace {
             accel: vec![Vector3::zeros(); n],
             force: vec![Vector3::zeros(); n],
             moment: vec![Vector3::zeros(); n],
+            axis: vec![Vector3::zeros(); n],
+            anchor: vec![Vector3::zeros(); n],
+            com: vec![Vector3::zeros(); n],
         }
     }
 }
@@ -83,6 +91,7 @@ pub fn inverse_dynamics(
     for i in 0..n {
         let axis = frames.axis(chain, i);
         let anchor = frames.anchor(i).coords;
+        (ws.axis[i], ws.anchor[i]) = (axis, anchor);
         let parent_origin = frames.body[i].translation.vector;
         let origin = frames.body[i + 1].translation.vector;
         let (w, al, a) = (ws.omega[i], ws.alpha[i], ws.accel[i]);
@@ -113,6 +122,7 @@ pub fn inverse_dynamics(
         let frame = &frames.body[b];
         let m = body.inertial.mass;
         let com = frame * body.inertial.com;
+        ws.com[b] = com.coords;
         let r = com.coords - frame.translation.vector;
         let a_com = point_accel(&ws.accel[b], &ws.omega[b], &ws.alpha[b], &r);
         let rot = frame.rotation.to_rotation_matrix();
@@ -140,9 +150,7 @@ pub fn inverse_dynamics(
     }
     for i in (0..n).rev() {
         let b = i + 1;
-        let frame = &frames.body[b];
-        let com = (frame * chain.bodies[b].inertial.com).coords;
-        let anchor = frames.anchor(i).coords;
+        let (com, anchor) = (ws.com[b], ws.anchor[i]);
         // Moment about the anchor of what lies beyond (already reduced to `reduced_at`) plus this body.
         n_about_origin = n_about_origin
             + (reduced_at - anchor).cross(&f)
@@ -150,7 +158,7 @@ pub fn inverse_dynamics(
             + (com - anchor).cross(&ws.force[b]);
         f += ws.force[b];
         reduced_at = anchor;
-        let axis = frames.axis(chain, i);
+        let axis = ws.axis[i];
         out[i] = match chain.joints[i].kind {
             JointKind::Revolute => axis.dot(&n_about_origin),
             JointKind::Prismatic => axis.dot(&f),

@@ -91,6 +91,15 @@ struct Remainder {
     before: Option<(f64, DVector<f64>)>,
     linear: Linear,
     linearized_at: f64,
+    /// Scratch of [`Remainder::step`], kept between nodes.
+    scratch: Scratch,
+}
+
+/// Buffers of one trapezoidal step: two vectors and the step's matrix.
+struct Scratch {
+    x: DVector<f64>,
+    product: DVector<f64>,
+    matrix: DMatrix<f64>,
 }
 
 /// The settled arm at a sample, before repeatability noise.
@@ -142,7 +151,10 @@ impl TrueRobot {
             damping: &damping,
             state: TrueState::new(self),
             still: TrueState::new(self),
-            direction: vec![1.0; n],
+            visit: Visit {
+                direction: vec![1.0; n],
+                temperature: None,
+            },
             remainder: None,
             ws: Workspace::new(&self.chain),
             frames: Frames::new(&self.chain),
@@ -197,8 +209,8 @@ impl TrueRobot {
                       gravity: &Vector3<f64>,
                       qd: &[f64],
                       qdd: &[f64],
-                      ws: &mut Workspace| {
-            let mut out = vec![0.0; n];
+                      ws: &mut Workspace,
+                      out: &mut [f64]| {
             inverse_dynamics(
                 &self.chain,
                 frames,
@@ -207,35 +219,45 @@ impl TrueRobot {
                 qd,
                 qdd,
                 ws,
-                &mut out,
+                out,
             );
-            DVector::from_vec(out)
         };
         let zero = vec![0.0; n];
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
-        let base = torque(&state.frames, &self.gravity, qd, qdd, ws);
+        let (mut base, mut ahead) = (vec![0.0; n], vec![0.0; n]);
+        torque(&state.frames, &self.gravity, qd, qdd, ws, &mut base);
         // Forward differences: their error (a step's share of the curvature) is a millionth of the sensitivity,
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
         const ANGLE: f64 = 1e-6;
+        let (mut unit, mut faster, mut q) = (zero.clone(), qd.to_vec(), state.q.clone());
         for j in 0..n {
-            let mut unit = zero.clone();
+            unit.fill(0.0);
             unit[j] = 1.0;
-            m.set_column(
-                j,
-                &torque(&state.frames, &Vector3::zeros(), &zero, &unit, ws),
+            torque(
+                &state.frames,
+                &Vector3::zeros(),
+                &zero,
+                &unit,
+                ws,
+                &mut ahead,
             );
-            let mut faster = qd.to_vec();
+            m.column_mut(j).copy_from_slice(&ahead);
+            faster.copy_from_slice(qd);
             faster[j] += RATE;
-            let ahead = torque(&state.frames, &self.gravity, &faster, qdd, ws);
-            c.set_column(j, &((ahead - &base) / RATE));
-            let mut q = state.q.clone();
+            torque(&state.frames, &self.gravity, &faster, qdd, ws, &mut ahead);
+            for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
+                c[(i, j)] = (a - b) / RATE;
+            }
+            q.copy_from_slice(&state.q);
             q[j] += ANGLE;
             self.kinematics(&q, &state.tilt, state.scale, frames);
-            let ahead = torque(frames, &self.gravity, qd, qdd, ws);
-            s.set_column(j, &((ahead - &base) / ANGLE));
+            torque(frames, &self.gravity, qd, qdd, ws, &mut ahead);
+            for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
+                s[(i, j)] = (a - b) / ANGLE;
+            }
         }
         for i in 0..n {
             c[(i, i)] += damping[i];
@@ -254,7 +276,8 @@ struct Walk<'a> {
     state: TrueState,
     /// The static solve at the same command (for the dynamic part's size).
     still: TrueState,
-    direction: Vec<f64>,
+    /// The direction each joint last moved in and the links' temperature, at the current node.
+    visit: Visit,
     remainder: Option<Remainder>,
     ws: Workspace,
     frames: Frames,
@@ -272,22 +295,20 @@ impl Walk<'_> {
                 p.q.len()
             )));
         }
-        for (d, v) in self.direction.iter_mut().zip(&p.qd) {
+        for (d, v) in self.visit.direction.iter_mut().zip(&p.qd) {
             if *v != 0.0 {
                 *d = v.signum();
             }
         }
-        let visit = Visit {
-            direction: self.direction.clone(),
-            temperature: robot
-                .perturbation
-                .thermal
-                .as_ref()
-                .map(|th| th.temperature_at(t)),
-        };
+        self.visit.temperature = robot
+            .perturbation
+            .thermal
+            .as_ref()
+            .map(|th| th.temperature_at(t));
+        let visit = &self.visit;
         let state = &mut self.state;
-        robot.unloaded_angles_after(&p.q, &visit, &mut state.q0);
-        state.scale = robot.length_scale(&visit);
+        robot.unloaded_angles_after(&p.q, visit, &mut state.q0);
+        state.scale = robot.length_scale(visit);
         match &self.remainder {
             // From the last nodes' deflection, extrapolated along its trend, and the last tilt.
             Some(r) => {
@@ -336,6 +357,11 @@ impl Walk<'_> {
                     before: None,
                     linear,
                     linearized_at: t,
+                    scratch: Scratch {
+                        x: DVector::zeros(n),
+                        product: DVector::zeros(n),
+                        matrix: DMatrix::zeros(n, n),
+                    },
                 });
             }
             (Some(r), linear) => {
@@ -351,7 +377,7 @@ impl Walk<'_> {
                     r.linear = linear;
                     r.linearized_at = t;
                 }
-                r.step(t, quasi_static)?;
+                r.step(t, &quasi_static)?;
             }
         }
         Ok(())
@@ -401,26 +427,55 @@ fn singular(t: f64) -> Error {
 
 impl Remainder {
     /// One trapezoidal (Newmark average-acceleration) step to time `t`, driven by `quasi_static` there.
-    fn step(&mut self, t: f64, quasi_static: DVector<f64>) -> Result<()> {
+    ///
+    /// In place, in the order of the expressions `s δ + M (z a₀ + v 4/h + a) + C (z a₁ + v)` and
+    /// `S + C a₁ + M a₀` (each product whole before it is added): the bits of the allocating form, without its
+    /// dozen allocations per node.
+    fn step(&mut self, t: f64, quasi_static: &DVector<f64>) -> Result<()> {
         let h = t - self.t;
         if h > 0.0 {
             let Linear { m, c, s } = &self.linear;
+            let Scratch { x, product, matrix } = &mut self.scratch;
             let (a0, a1) = (4.0 / (h * h), 2.0 / h);
-            let rhs = s * &quasi_static
-                + m * (&self.z * a0 + &self.v * (4.0 / h) + &self.a)
-                + c * (&self.z * a1 + &self.v);
-            let z = (s + c * a1 + m * a0)
-                .lu()
-                .solve(&rhs)
-                .ok_or_else(|| singular(t))?;
-            let v = (&z - &self.z) * a1 - &self.v;
-            let a = (&z - &self.z) * a0 - &self.v * (4.0 / h) - &self.a;
-            (self.z, self.v, self.a) = (z, v, a);
-            let last = std::mem::replace(&mut self.quasi_static, quasi_static);
-            self.before = Some((self.t, last));
+            let mut rhs = s * quasi_static;
+            x.copy_from(&self.z);
+            *x *= a0;
+            x.axpy(4.0 / h, &self.v, 1.0);
+            *x += &self.a;
+            product.gemv(1.0, m, x, 0.0);
+            rhs += &*product;
+            x.copy_from(&self.z);
+            *x *= a1;
+            *x += &self.v;
+            product.gemv(1.0, c, x, 0.0);
+            rhs += &*product;
+            for (((out, s), c), m) in matrix.iter_mut().zip(s.iter()).zip(c.iter()).zip(m.iter()) {
+                *out = s + c * a1 + m * a0;
+            }
+            if !matrix.clone().lu().solve_mut(&mut rhs) {
+                return Err(singular(t));
+            }
+            let z = rhs;
+            for (((zi, old), v), a) in z
+                .iter()
+                .zip(self.z.iter())
+                .zip(self.v.iter_mut())
+                .zip(self.a.iter_mut())
+            {
+                let d = zi - old;
+                *a = d * a0 - *v * (4.0 / h) - *a;
+                *v = d * a1 - *v;
+            }
+            self.z = z;
+            let before = self
+                .before
+                .get_or_insert_with(|| (0.0, DVector::zeros(quasi_static.len())));
+            before.0 = self.t;
+            std::mem::swap(&mut before.1, &mut self.quasi_static);
+            self.quasi_static.copy_from(quasi_static);
             self.t = t;
         } else {
-            self.quasi_static = quasi_static;
+            self.quasi_static.copy_from(quasi_static);
         }
         Ok(())
     }
