@@ -16,7 +16,7 @@ use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Observation;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
-use crate::dataset::{Dataset, Split, TruthTable};
+use crate::dataset::{Dataset, TruthTable};
 use crate::error::{Error, Result};
 use crate::eval::iso_cubes::{self, CubesReport, Side};
 use crate::eval::split::{Parts, SplitRule};
@@ -29,6 +29,7 @@ use crate::robot::{Chain, Payload};
 use super::calibration_report::{
     CalibrationReport, ClockReport, RegistrationReport, TestRegistrationReport, worse_than_nominal,
 };
+use super::predictions::predictions_csv;
 use super::test_points;
 
 /// What to fit and where to test it (the flags of `calibrate`).
@@ -460,9 +461,7 @@ struct TestPoints {
 /// Per test point: inside the model's training domain or not (outside, its regression is left out).
 fn test_points(inputs: &Inputs, pair: &FittedPair, judged: &Judged) -> Result<TestPoints> {
     let test = inputs.test();
-    let placements: Vec<_> = (0..test.len())
-        .map(|i| test_points::place(pair.model(), &test.q[i], test.extra_inputs_of(i)))
-        .collect();
+    let placements = test_points::place_all(pair.model(), test);
     let (csv, outside) = test_points::test_points_csv(
         &test.point_ids,
         &placements,
@@ -631,63 +630,4 @@ fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
 /// As a [`Value`], whose maps sort their keys.
 fn to_value(value: &impl Serialize) -> Result<Value> {
     serde_json::to_value(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
-}
-
-fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
-    let observations = model.registration().observe(data)?;
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let csv_err = |e: csv::Error| Error::Invalid(format!("predictions.csv: {e}"));
-    let mut header = vec![
-        "point_id",
-        "split",
-        "measured_x",
-        "measured_y",
-        "measured_z",
-        "nominal_x",
-        "nominal_y",
-        "nominal_z",
-        "predicted_x",
-        "predicted_y",
-        "predicted_z",
-        "error_before_mm",
-        "error_after_mm",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect::<Vec<_>>();
-    let with_orientation = model.registration().measures_orientation();
-    if with_orientation {
-        header.extend(
-            [
-                "predicted_qw",
-                "predicted_qx",
-                "predicted_qy",
-                "predicted_qz",
-                "orientation_before_rad",
-                "orientation_after_rad",
-            ]
-            .map(String::from),
-        );
-    }
-    w.write_record(&header).map_err(csv_err)?;
-    for ((id, o), label) in data.point_ids.iter().zip(&observations).zip(labels) {
-        let (np, nr) = model.nominal(&o.q);
-        let p = model.predict_with(&o.q, &o.inputs);
-        let mut row = vec![id.clone(), format!("{label:?}").to_lowercase()];
-        for v in [o.position.coords, np.coords, p.position.coords] {
-            row.extend(v.iter().map(|x| x.to_string()));
-        }
-        row.push(((o.position - np).norm() * 1e3).to_string());
-        row.push(((o.position - p.position).norm() * 1e3).to_string());
-        if with_orientation {
-            let q = p.orientation.quaternion();
-            row.extend([q.w, q.i, q.j, q.k].map(|v| v.to_string()));
-            let m = o.orientation.unwrap_or(nr);
-            row.push(m.angle_to(&nr).to_string());
-            row.push(m.angle_to(&p.orientation).to_string());
-        }
-        w.write_record(&row).map_err(csv_err)?;
-    }
-    w.into_inner()
-        .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
 }
