@@ -369,6 +369,66 @@ fn out_err(path: &Path, message: impl std::fmt::Display) -> Error {
     Error::Invalid(format!("--out {}: {message}", path.display()))
 }
 
+/// A CSV file built in memory, numbers written as `Display` writes them (the shortest text that reads back as
+/// the same number): through one reused buffer, not a `String` per cell, which cost as much as the digits.
+pub struct CsvText {
+    name: &'static str,
+    writer: csv::Writer<Vec<u8>>,
+    cell: String,
+}
+
+impl CsvText {
+    /// A file named `name` (for messages) with the columns `header`.
+    pub fn new<H: AsRef<[u8]>>(
+        name: &'static str,
+        header: impl IntoIterator<Item = H>,
+    ) -> Result<CsvText> {
+        let mut text = CsvText {
+            name,
+            writer: csv::Writer::from_writer(Vec::new()),
+            cell: String::with_capacity(32),
+        };
+        text.writer
+            .write_record(header)
+            .map_err(|e| text.error(e))?;
+        Ok(text)
+    }
+
+    /// The next cell of the row, as text (quoted where CSV needs it).
+    pub fn text(&mut self, cell: &str) -> Result<()> {
+        self.writer.write_field(cell).map_err(|e| self.error(e))
+    }
+
+    /// The next cell of the row: `value` as `value.to_string()` writes it.
+    pub fn number(&mut self, value: f64) -> Result<()> {
+        use std::fmt::Write as _;
+        self.cell.clear();
+        write!(self.cell, "{value}").expect("a String takes any text");
+        self.writer
+            .write_field(&self.cell)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", self.name)))
+    }
+
+    /// Ends the row.
+    pub fn end_row(&mut self) -> Result<()> {
+        self.writer
+            .write_record(None::<&[u8]>)
+            .map_err(|e| self.error(e))
+    }
+
+    /// The file's bytes.
+    pub fn finish(self) -> Result<Vec<u8>> {
+        let name = self.name;
+        self.writer
+            .into_inner()
+            .map_err(|e| Error::Invalid(format!("{name}: {e}")))
+    }
+
+    fn error(&self, e: csv::Error) -> Error {
+        Error::Invalid(format!("{}: {e}", self.name))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

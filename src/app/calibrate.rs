@@ -16,7 +16,7 @@ use crate::calib::regression::RegressionOptions;
 use crate::calib::tracker_frame::Observation;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
-use crate::dataset::{Dataset, Split, TruthTable};
+use crate::dataset::{Dataset, TruthTable};
 use crate::error::{Error, Result};
 use crate::eval::iso_cubes::{self, CubesReport, Side};
 use crate::eval::split::{Parts, SplitRule};
@@ -29,6 +29,7 @@ use crate::robot::{Chain, Payload};
 use super::calibration_report::{
     CalibrationReport, ClockReport, RegistrationReport, TestRegistrationReport, worse_than_nominal,
 };
+use super::predictions::predictions_csv;
 use super::test_points;
 
 /// What to fit and where to test it (the flags of `calibrate`).
@@ -120,16 +121,33 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     output::check_dir(&options.out, &FIT_OUTPUTS)?;
     let inputs = read(options)?;
     let pair = fit_pair(options, &inputs)?;
-    let judged = judge(options, &inputs, &pair)?;
-    let points = test_points(&inputs, &pair, &judged)?;
-    let report = report(options, &inputs, &pair, &judged, points.outside);
-    write(options, &inputs, &pair, &report, points.csv)?;
-    let tables = tables(&inputs, &pair, &report, &judged)?;
-    Ok(FitOutcome {
-        report,
-        tables,
-        out: options.out.clone(),
+    // `predictions.csv` (every point predicted and written out) needs only the model: made on another core
+    // while the model is judged.
+    std::thread::scope(|s| {
+        let predictions =
+            s.spawn(|| predictions_csv(pair.model(), &inputs.data, &inputs.parts.labels));
+        let judged = judge(options, &inputs, &pair)?;
+        let points = test_points(&inputs, &pair, &judged)?;
+        let report = report(options, &inputs, &pair, &judged, points.outside);
+        let files = Files {
+            predictions: joined(predictions)?,
+            test_points: points.csv,
+        };
+        write(options, &pair, &report, files)?;
+        let tables = tables(&inputs, &pair, &report, &judged)?;
+        Ok(FitOutcome {
+            report,
+            tables,
+            out: options.out.clone(),
+        })
     })
+}
+
+/// What a scoped thread returned; its panic goes on in the caller.
+fn joined<T>(handle: std::thread::ScopedJoinHandle<'_, T>) -> T {
+    handle
+        .join()
+        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
 }
 
 /// What [`fit`] reads: the robot, the data (synchronised), the test campaign or split, the truth.
@@ -177,6 +195,21 @@ pub(crate) fn robot_and_mapping(
 /// Reads the robot, the data and the test campaign (each checked against the joint ranges and synchronised),
 /// the truth, and splits the data.
 fn read(options: &FitOptions) -> Result<Inputs> {
+    // The truth (another whole file) is read on another core meanwhile, when it will be needed.
+    std::thread::scope(|s| {
+        let truth = match (&options.truth, &options.test_data) {
+            (Some(path), None) => Some(s.spawn(|| TruthTable::read(path))),
+            _ => None,
+        };
+        read_with(options, truth)
+    })
+}
+
+/// [`read`], the truth's file being read by `reading` when given.
+fn read_with(
+    options: &FitOptions,
+    reading: Option<std::thread::ScopedJoinHandle<'_, Result<TruthTable>>>,
+) -> Result<Inputs> {
     let (chain, dh, mapping) = robot_and_mapping(
         &options.robot,
         options.flange_link.as_deref(),
@@ -214,9 +247,10 @@ fn read(options: &FitOptions) -> Result<Inputs> {
                 .into(),
         ));
     }
-    let truth = match &options.truth {
-        Some(path) => Some(TruthTable::read(path)?.aligned_to(&data)?),
-        None => None,
+    let truth = match (&options.truth, reading) {
+        (Some(_), Some(reading)) => Some(joined(reading)?.aligned_to(&data)?),
+        (Some(path), None) => Some(TruthTable::read(path)?.aligned_to(&data)?),
+        (None, _) => None,
     };
     let parts = options.split.apply(&data, test_file.is_some())?;
     if parts.test_indices.is_empty() && test_file.is_none() {
@@ -284,26 +318,25 @@ impl FittedPair {
 /// Fits the method on the training and validation parts, timed, then the nominal model.
 fn fit_pair(options: &FitOptions, inputs: &Inputs) -> Result<FittedPair> {
     let (train, val) = (&inputs.parts.train, &inputs.parts.val);
-    let started = Instant::now();
     let ctx = inputs.ctx(options);
-    let fitting = format!("fitting {}", options.method.info());
-    let model = options
-        .method
-        .fit(&ctx, train, val)
-        .map_err(|e| e.in_data(&inputs.data.origin, &fitting))?;
-    let fit_ms = started.elapsed().as_secs_f64() * 1e3;
-
-    // "Measured" (before) is one number per data set: the nominal kinematics under the nominal model's own
-    // registration, whatever the method (a method's refined registration is reported apart).
-    let nominal = if options.method == REFERENCE {
-        None
-    } else {
-        Some(REFERENCE.fit(&ctx, train, val)?)
-    };
-    Ok(FittedPair {
-        model,
-        nominal,
-        fit_ms,
+    std::thread::scope(|s| {
+        // "Measured" (before) is one number per data set: the nominal kinematics under the nominal model's
+        // own registration, whatever the method (a method's refined registration is reported apart). It
+        // does not depend on the method's fit, so it is fitted beside it, on another core.
+        let nominal =
+            (options.method != REFERENCE).then(|| s.spawn(|| REFERENCE.fit(&ctx, train, val)));
+        let started = Instant::now();
+        let fitting = format!("fitting {}", options.method.info());
+        let model = options
+            .method
+            .fit(&ctx, train, val)
+            .map_err(|e| e.in_data(&inputs.data.origin, &fitting))?;
+        let fit_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(FittedPair {
+            model,
+            nominal: nominal.map(joined).transpose()?,
+            fit_ms,
+        })
     })
 }
 
@@ -460,9 +493,7 @@ struct TestPoints {
 /// Per test point: inside the model's training domain or not (outside, its regression is left out).
 fn test_points(inputs: &Inputs, pair: &FittedPair, judged: &Judged) -> Result<TestPoints> {
     let test = inputs.test();
-    let placements: Vec<_> = (0..test.len())
-        .map(|i| test_points::place(pair.model(), &test.q[i], test.extra_inputs_of(i)))
-        .collect();
+    let placements = test_points::place_all(pair.model(), test);
     let (csv, outside) = test_points::test_points_csv(
         &test.point_ids,
         &placements,
@@ -543,23 +574,27 @@ fn report(
     report
 }
 
+/// The fit's CSV files.
+struct Files {
+    predictions: Vec<u8>,
+    test_points: Vec<u8>,
+}
+
 /// Writes the fit's files, all or none.
 fn write(
     options: &FitOptions,
-    inputs: &Inputs,
     pair: &FittedPair,
     report: &CalibrationReport,
-    test_points_file: Vec<u8>,
+    files: Files,
 ) -> Result<()> {
     let model = pair.model();
-    let predictions = predictions_csv(model, &inputs.data, &inputs.parts.labels)?;
     output::write_dir(
         &options.out,
         &[
             ("report.json", to_json(&to_value(report)?)?),
             ("model.json", to_json(&model.save()?)?),
-            ("predictions.csv", predictions),
-            ("test_points.csv", test_points_file),
+            ("predictions.csv", files.predictions),
+            ("test_points.csv", files.test_points),
         ],
         &[],
     )
@@ -631,63 +666,4 @@ fn to_json(value: &impl Serialize) -> Result<Vec<u8>> {
 /// As a [`Value`], whose maps sort their keys.
 fn to_value(value: &impl Serialize) -> Result<Value> {
     serde_json::to_value(value).map_err(|e| Error::Invalid(format!("cannot serialize: {e}")))
-}
-
-fn predictions_csv(model: &dyn Fitted, data: &Dataset, labels: &[Split]) -> Result<Vec<u8>> {
-    let observations = model.registration().observe(data)?;
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let csv_err = |e: csv::Error| Error::Invalid(format!("predictions.csv: {e}"));
-    let mut header = vec![
-        "point_id",
-        "split",
-        "measured_x",
-        "measured_y",
-        "measured_z",
-        "nominal_x",
-        "nominal_y",
-        "nominal_z",
-        "predicted_x",
-        "predicted_y",
-        "predicted_z",
-        "error_before_mm",
-        "error_after_mm",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect::<Vec<_>>();
-    let with_orientation = model.registration().measures_orientation();
-    if with_orientation {
-        header.extend(
-            [
-                "predicted_qw",
-                "predicted_qx",
-                "predicted_qy",
-                "predicted_qz",
-                "orientation_before_rad",
-                "orientation_after_rad",
-            ]
-            .map(String::from),
-        );
-    }
-    w.write_record(&header).map_err(csv_err)?;
-    for ((id, o), label) in data.point_ids.iter().zip(&observations).zip(labels) {
-        let (np, nr) = model.nominal(&o.q);
-        let p = model.predict_with(&o.q, &o.inputs);
-        let mut row = vec![id.clone(), format!("{label:?}").to_lowercase()];
-        for v in [o.position.coords, np.coords, p.position.coords] {
-            row.extend(v.iter().map(|x| x.to_string()));
-        }
-        row.push(((o.position - np).norm() * 1e3).to_string());
-        row.push(((o.position - p.position).norm() * 1e3).to_string());
-        if with_orientation {
-            let q = p.orientation.quaternion();
-            row.extend([q.w, q.i, q.j, q.k].map(|v| v.to_string()));
-            let m = o.orientation.unwrap_or(nr);
-            row.push(m.angle_to(&nr).to_string());
-            row.push(m.angle_to(&p.orientation).to_string());
-        }
-        w.write_record(&row).map_err(csv_err)?;
-    }
-    w.into_inner()
-        .map_err(|e| Error::Invalid(format!("predictions.csv: {e}")))
 }

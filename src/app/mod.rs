@@ -11,6 +11,7 @@ pub mod apply;
 pub mod arg_values;
 pub mod calibrate;
 pub mod calibration_report;
+pub mod predictions;
 pub mod campaign;
 pub mod curve;
 pub mod export;

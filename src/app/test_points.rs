@@ -3,7 +3,9 @@
 
 use crate::calib::domain::Placement;
 use crate::calib::method::Fitted;
-use crate::error::{Error, Result};
+use crate::dataset::Dataset;
+use crate::error::Result;
+use crate::output::CsvText;
 
 /// The `domain` cell: `inside`, or `outside: <what lies outside>`.
 pub fn domain_cell(p: &Placement) -> String {
@@ -19,6 +21,12 @@ pub fn place(model: &dyn Fitted, q: &[f64], inputs: &[f64]) -> Placement {
     model.basis().domain.place(model.joint_names(), q, inputs)
 }
 
+/// Where `model` places each point of `data`.
+pub fn place_all(model: &dyn Fitted, data: &Dataset) -> Vec<Placement> {
+    let points = (0..data.len()).map(|i| (data.q[i].as_slice(), data.extra_inputs_of(i)));
+    model.basis().domain.place_all(model.joint_names(), points)
+}
+
 /// `test_points.csv`: per test point its id, the Measured (nominal) and the calibrated error (mm), the
 /// joint-space distance to the nearest training configuration and whether it lies inside the training
 /// domain. Returns the file and how many points lie outside.
@@ -28,29 +36,27 @@ pub fn test_points_csv(
     before_m: &[f64],
     after_m: &[f64],
 ) -> Result<(Vec<u8>, usize)> {
-    let csv_err = |e: csv::Error| Error::Invalid(format!("test_points.csv: {e}"));
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record([
-        "point_id",
-        "error_before_mm",
-        "error_after_mm",
-        "domain_distance_rad",
-        "status",
-    ])
-    .map_err(csv_err)?;
+    let mut csv = CsvText::new(
+        "test_points.csv",
+        [
+            "point_id",
+            "error_before_mm",
+            "error_after_mm",
+            "domain_distance_rad",
+            "status",
+        ],
+    )?;
     for (((id, p), b), a) in ids.iter().zip(placements).zip(before_m).zip(after_m) {
-        w.write_record([
-            id.clone(),
-            (b * 1e3).to_string(),
-            (a * 1e3).to_string(),
-            p.distance_rad.to_string(),
-            domain_cell(p),
-        ])
-        .map_err(csv_err)?;
+        csv.text(id)?;
+        csv.number(b * 1e3)?;
+        csv.number(a * 1e3)?;
+        csv.number(p.distance_rad)?;
+        match p.inside {
+            true => csv.text("inside")?,
+            false => csv.text(&domain_cell(p))?,
+        }
+        csv.end_row()?;
     }
     let outside = placements.iter().filter(|p| !p.inside).count();
-    let bytes = w
-        .into_inner()
-        .map_err(|e| Error::Invalid(format!("test_points.csv: {e}")))?;
-    Ok((bytes, outside))
+    Ok((csv.finish()?, outside))
 }

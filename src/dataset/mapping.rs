@@ -307,9 +307,9 @@ impl ColumnMapping {
             Some(c) => Some(table.find(c, "point_id")?),
             None => None,
         };
-        let mut ids = Vec::with_capacity(table.rows.len());
-        let mut q = Vec::with_capacity(table.rows.len());
-        for r in 0..table.rows.len() {
+        let mut ids = Vec::with_capacity(table.len());
+        let mut q = Vec::with_capacity(table.len());
+        for r in 0..table.len() {
             ids.push(match id_col {
                 Some(c) => table.cell(r, c).to_string(),
                 None => (r + 2).to_string(),
@@ -344,7 +344,7 @@ impl ColumnMapping {
                 }),
             })
             .collect::<Result<Vec<_>>>()?;
-        (0..table.rows.len())
+        (0..table.len())
             .map(|r| cols.iter().map(|&c| table.number(r, c)).collect())
             .collect()
     }
@@ -516,7 +516,7 @@ impl ColumnMapping {
     /// Every row of `table` read through `columns`, in metres and radians; an error names the first faulty
     /// cell.
     fn rows(&self, table: &CsvTable, columns: &Columns) -> Result<Rows> {
-        let n = table.rows.len();
+        let n = table.len();
         let mut rows = Rows {
             q: Vec::with_capacity(n),
             measured: Vec::with_capacity(n),

@@ -141,7 +141,7 @@ impl Dataset {
         let time_col = table.column(TIME_COLUMN);
         let rate_cols = table.rate_columns(joint_names)?;
 
-        let n = table.rows.len();
+        let n = table.len();
         let point_ids = table.point_ids()?;
         let mut q = Vec::with_capacity(n);
         let mut measured = Vec::with_capacity(n);
@@ -329,9 +329,7 @@ pub fn inputs_from_reader(
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    (0..table.rows.len())
-        .map(|r| table.numbers(r, &cols))
-        .collect()
+    (0..table.len()).map(|r| table.numbers(r, &cols)).collect()
 }
 
 /// Configurations measured more than once: the indices of each group of `q` whose joint angles agree to
@@ -359,7 +357,7 @@ pub fn joints_from_reader(
 ) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
     let table = CsvTable::load(reader, origin, Dialect::PLAIN)?;
     let joints = table.joint_columns(joint_names)?;
-    let q = (0..table.rows.len())
+    let q = (0..table.len())
         .map(|r| table.numbers(r, &joints))
         .collect::<Result<Vec<_>>>()?;
     Ok((table.point_ids()?, q))
@@ -476,11 +474,11 @@ impl CsvTable {
     /// The `point_id` column (non-empty, unique), or the rows' numbers when it is absent.
     fn point_ids(&self) -> Result<Vec<String>> {
         let Some(c) = self.column("point_id") else {
-            return Ok((0..self.rows.len()).map(|r| (r + 2).to_string()).collect());
+            return Ok((0..self.len()).map(|r| (r + 2).to_string()).collect());
         };
         let mut seen: HashMap<&str, usize> = HashMap::new();
-        let mut ids = Vec::with_capacity(self.rows.len());
-        for r in 0..self.rows.len() {
+        let mut ids = Vec::with_capacity(self.len());
+        for r in 0..self.len() {
             let id = self.cell(r, c);
             if id.is_empty() {
                 return Err(self.error(format!("{}: empty", self.at(r, c))));

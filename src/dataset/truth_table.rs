@@ -49,7 +49,7 @@ impl TruthTable {
             )));
         }
         let point_ids = table.point_ids()?;
-        let rows = 0..table.rows.len();
+        let rows = 0..table.len();
         let in_base = rows
             .clone()
             .map(|r| table.points(r, &base_cols))
