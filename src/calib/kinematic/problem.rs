@@ -108,6 +108,13 @@ impl Problem<'_> {
             after: Vec::with_capacity(s.errors.len() + 1),
             flange: self.dh.base,
         };
+        // Only the frames whose errors are fitted need their axes.
+        let mut fitted = vec![false; s.errors.len()];
+        for prm in &self.params {
+            if let Param::Error(e) = prm {
+                fitted[e.frame - 1] = true;
+            }
+        }
         let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
@@ -134,6 +141,7 @@ impl Problem<'_> {
                     .zip(&s.errors)
                     .zip(&jl_errors)
                     .enumerate()
+                    .filter(|(i, _)| fitted[*i])
                 {
                     let r = g.rotation.to_rotation_matrix().into_inner();
                     axes[i] = (r, r * jl, g * Point3::new(e[0], e[1], e[2]));
