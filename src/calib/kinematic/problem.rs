@@ -108,6 +108,7 @@ impl Problem<'_> {
             after: Vec::with_capacity(s.errors.len() + 1),
             flange: self.dh.base,
         };
+        let fixed = self.dh.fixed_rotations();
         // Only the frames whose errors are fitted need their axes.
         let mut fitted = vec![false; s.errors.len()];
         for prm in &self.params {
@@ -129,7 +130,7 @@ impl Problem<'_> {
                 let links = qd
                     .iter()
                     .enumerate()
-                    .map(|(i, &qi)| self.dh.link_transform(i, qi));
+                    .map(|(i, &qi)| self.dh.link_transform_fixed(i, qi, &fixed));
                 frames.rebuild(self.dh, links, &transforms);
             } else {
                 frames.rebuild(self.dh, pt.links.iter().copied(), &transforms);
