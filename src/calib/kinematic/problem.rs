@@ -109,13 +109,7 @@ impl Problem<'_> {
             flange: self.dh.base,
         };
         let fixed = self.dh.fixed_rotations();
-        // Only the frames whose errors are fitted need their axes.
-        let mut fitted = vec![false; s.errors.len()];
-        for prm in &self.params {
-            if let Param::Error(e) = prm {
-                fitted[e.frame - 1] = true;
-            }
-        }
+        let fitted = self.fitted_frames(s.errors.len());
         let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
@@ -185,6 +179,17 @@ impl Problem<'_> {
             }
             row += if rotation.is_some() { 6 } else { 3 };
         }
+    }
+
+    /// Per error frame (of `n`), whether any of its errors is fitted: only those frames' axes are needed.
+    fn fitted_frames(&self, n: usize) -> Vec<bool> {
+        let mut fitted = vec![false; n];
+        for prm in &self.params {
+            if let Param::Error(e) = prm {
+                fitted[e.frame - 1] = true;
+            }
+        }
+        fitted
     }
 
     /// `r` and `j` resized to the problem's rows and parameters where they differ.
