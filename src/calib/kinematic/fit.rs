@@ -96,22 +96,51 @@ pub(super) fn structural(
     (structural, dropped)
 }
 
-/// The Jacobian of the structural set at the base state, on the probe's points, as the triangle `R` of its
-/// QR (`RᵀR = JᵀJ`): the lengths of its columns and the angles between them, which are all that judging
-/// what the data determine reads ([`determined`]), in as many rows as there are parameters instead of three
-/// per point — the judgement runs several times a fit.
-pub(super) fn jacobian_at_base(
-    probe: &mut Problem,
-    base: &State,
-    structural: &[Param],
-) -> DMatrix<f64> {
+/// The structural set at the base state on the training points: its residuals and Jacobian, and the triangle
+/// `R` of the Jacobian's QR (`RᵀR = JᵀJ`): the lengths of its columns and the angles between them, which are
+/// all that judging what the data determine reads ([`determined`]), in as many rows as there are parameters
+/// instead of three per point — the judgement runs several times a fit.
+pub(super) struct AtBase {
+    structural: Vec<Param>,
+    residual: DVector<f64>,
+    jacobian: DMatrix<f64>,
+    pub(super) triangle: DMatrix<f64>,
+}
+
+impl AtBase {
+    /// The residuals and Jacobian of `kept` at the base state, as evaluating `kept` alone gives them: the
+    /// state is the base state either way and a column depends on its own parameter only, so they are the
+    /// structural Jacobian's columns (the same bits, one evaluation of every point fewer per fit of a set).
+    /// `None` where `kept` is not within the structural set.
+    fn of(&self, kept: &[Param]) -> Option<(DVector<f64>, DMatrix<f64>)> {
+        let columns: Vec<usize> = kept
+            .iter()
+            .map(|p| self.structural.iter().position(|s| s == p))
+            .collect::<Option<_>>()?;
+        Some((
+            self.residual.clone(),
+            self.jacobian.select_columns(columns.iter()),
+        ))
+    }
+}
+
+/// [`AtBase`] of the structural set on the probe's points.
+pub(super) fn jacobian_at_base(probe: &mut Problem, base: &State, structural: &[Param]) -> AtBase {
     probe.params = structural.to_vec();
     let x_struct: Vec<f64> = structural.iter().map(|&p| base.get(p)).collect();
-    let j = probe
-        .evaluate(&x_struct, true)
-        .1
-        .expect("jacobian requested");
-    if j.nrows() > j.ncols() { j.qr().r() } else { j }
+    let (residual, j) = probe.evaluate(&x_struct, true);
+    let jacobian = j.expect("jacobian requested");
+    let triangle = if jacobian.nrows() > jacobian.ncols() {
+        jacobian.clone().qr().r()
+    } else {
+        jacobian.clone()
+    };
+    AtBase {
+        structural: structural.to_vec(),
+        residual,
+        jacobian,
+        triangle,
+    }
 }
 
 /// What [`solve_within_bounds`] leaves: the kept parameters, their values and standard deviations, the
@@ -145,7 +174,7 @@ const MAX_REJUDGEMENTS: usize = 4;
 pub(super) fn solve_judged(
     probe: &mut Problem,
     base: &State,
-    j_struct: &DMatrix<f64>,
+    at_base: &AtBase,
     structural: &[Param],
     start: Noise,
     floor: Noise,
@@ -155,7 +184,7 @@ pub(super) fn solve_judged(
     let mut solution = solve_within_bounds(
         probe,
         base,
-        j_struct,
+        at_base,
         structural,
         start,
         max_evaluations,
@@ -165,7 +194,7 @@ pub(super) fn solve_judged(
     for _ in 0..MAX_REJUDGEMENTS {
         let at_fit = noise::fitted(&solution.residual, solution.kept.len(), floor);
         let (mut kept, mut undetermined) =
-            determined(j_struct, structural, at_fit, probe.points.len());
+            determined(&at_base.triangle, structural, at_fit, probe.points.len());
         let bound = |name: &str| solution.at_bound.iter().any(|b| b.parameter == name);
         kept.retain(|p| !bound(&p.name()));
         if kept == solution.kept {
@@ -181,7 +210,7 @@ pub(super) fn solve_judged(
         match solve_within_bounds(
             probe,
             base,
-            j_struct,
+            at_base,
             structural,
             at_fit,
             max_evaluations,
@@ -199,7 +228,7 @@ pub(super) fn solve_judged(
 fn solve_within_bounds(
     probe: &mut Problem,
     base: &State,
-    j_struct: &DMatrix<f64>,
+    at_base: &AtBase,
     structural: &[Param],
     noise: Noise,
     max_evaluations: usize,
@@ -210,7 +239,7 @@ fn solve_within_bounds(
     let mut at_bound: Vec<Undetermined> = Vec::new();
     loop {
         let (mut kept, mut undetermined) =
-            determined(j_struct, structural, noise, probe.points.len());
+            determined(&at_base.triangle, structural, noise, probe.points.len());
         let bound = |p: &Param| at_bound.iter().any(|u| u.parameter == p.name());
         kept.retain(|p| !bound(p));
         let Fit {
@@ -219,7 +248,7 @@ fn solve_within_bounds(
             values,
             std,
             residual,
-        } = solve_kept(probe, base, &kept, max_evaluations, method)?;
+        } = solve_kept(probe, base, at_base, &kept, max_evaluations, method)?;
         let negative = kept
             .iter()
             .zip(&values)
@@ -330,14 +359,18 @@ pub(super) fn base_error(registration: &Registration, state: &State) -> Option<I
 fn solve_kept(
     probe: &mut Problem,
     base: &State,
+    at_base: &AtBase,
     kept: &[Param],
     max_evaluations: usize,
     method: &MethodInfo,
 ) -> Result<Fit> {
     probe.params = kept.to_vec();
     let x0: Vec<f64> = kept.iter().map(|&p| base.get(p)).collect();
-    let (_, j0) = probe.evaluate(&x0, true);
-    let id = identifiability(&j0.expect("jacobian requested"), kept);
+    let (r0, j0) = at_base.of(kept).unwrap_or_else(|| {
+        let (r0, j0) = probe.evaluate(&x0, true);
+        (r0, j0.expect("jacobian requested"))
+    });
+    let id = identifiability(&j0, kept);
     if id.rank < kept.len() {
         let weakest = if id.weakest.is_empty() {
             String::new()
@@ -360,6 +393,7 @@ fn solve_kept(
     let minimum = minimize(
         probe,
         &DVector::from_vec(x0),
+        (r0, j0),
         &whitening,
         max_evaluations.max(2),
     )

@@ -243,12 +243,12 @@ impl KinematicModel {
         // What the training data determine of it, at the noise of the measurement (see `noise`); the rest
         // stays nominal and is reported.
         probe.points = fit::points(dh, gravity.as_ref(), registration.observe(train)?);
-        let j_struct = fit::jacobian_at_base(&mut probe, &base, &structural);
+        let at_base = fit::jacobian_at_base(&mut probe, &base, &structural);
         let floor = noise::floor(train, val);
         let solution = fit::solve_judged(
             &mut probe,
             &base,
-            &j_struct,
+            &at_base,
             &structural,
             noise::nominal(dh, &registration, train, val, floor)?,
             floor,

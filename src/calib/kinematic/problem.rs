@@ -108,6 +108,8 @@ impl Problem<'_> {
             after: Vec::with_capacity(s.errors.len() + 1),
             flange: self.dh.base,
         };
+        let fixed = self.dh.fixed_rotations();
+        let fitted = self.fitted_frames(s.errors.len());
         let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
@@ -122,7 +124,7 @@ impl Problem<'_> {
                 let links = qd
                     .iter()
                     .enumerate()
-                    .map(|(i, &qi)| self.dh.link_transform(i, qi));
+                    .map(|(i, &qi)| self.dh.link_transform_fixed(i, qi, &fixed));
                 frames.rebuild(self.dh, links, &transforms);
             } else {
                 frames.rebuild(self.dh, pt.links.iter().copied(), &transforms);
@@ -134,6 +136,7 @@ impl Problem<'_> {
                     .zip(&s.errors)
                     .zip(&jl_errors)
                     .enumerate()
+                    .filter(|(i, _)| fitted[*i])
                 {
                     let r = g.rotation.to_rotation_matrix().into_inner();
                     axes[i] = (r, r * jl, g * Point3::new(e[0], e[1], e[2]));
@@ -176,6 +179,17 @@ impl Problem<'_> {
             }
             row += if rotation.is_some() { 6 } else { 3 };
         }
+    }
+
+    /// Per error frame (of `n`), whether any of its errors is fitted: only those frames' axes are needed.
+    fn fitted_frames(&self, n: usize) -> Vec<bool> {
+        let mut fitted = vec![false; n];
+        for prm in &self.params {
+            if let Param::Error(e) = prm {
+                fitted[e.frame - 1] = true;
+            }
+        }
+        fitted
     }
 
     /// `r` and `j` resized to the problem's rows and parameters where they differ.

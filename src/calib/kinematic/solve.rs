@@ -60,6 +60,19 @@ impl Whitened<'_> {
     fn x(&self) -> DVector<f64> {
         self.x0 + self.s * &self.z
     }
+
+    /// The start `z = 0` (`x = x0`), whose residuals `r0` and Jacobian `j0` the caller has evaluated.
+    fn start(&mut self, r0: DVector<f64>, j0: DMatrix<f64>) {
+        self.z.fill(0.0);
+        self.r = r0;
+        self.j = j0;
+        self.whiten_and_reduce();
+    }
+
+    fn whiten_and_reduce(&mut self) {
+        self.jz.gemm(1.0, &self.j, self.s, 0.0);
+        self.small = reduce(&self.jz, &self.r);
+    }
 }
 
 impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
@@ -72,8 +85,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
         let x = self.x();
         self.problem
             .evaluate_into(x.as_slice(), &mut self.r, Some(&mut self.j));
-        self.jz.gemm(1.0, &self.j, self.s, 0.0);
-        self.small = reduce(&self.jz, &self.r);
+        self.whiten_and_reduce();
     }
 
     fn params(&self) -> DVector<f64> {
@@ -90,10 +102,12 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
 }
 
 /// Levenberg–Marquardt (the `levenberg-marquardt` crate, MINPACK's algorithm) on the whitened problem, from
-/// `x0`. A run that stops for any reason but convergence is an error, never a silent result.
+/// `x0`, where the residuals are `r0` and the Jacobian `j0` (the rank check's evaluation, not done again).
+/// A run that stops for any reason but convergence is an error, never a silent result.
 pub(super) fn minimize(
     problem: &Problem,
     x0: &DVector<f64>,
+    (r0, j0): (DVector<f64>, DMatrix<f64>),
     s: &DMatrix<f64>,
     max_evaluations: usize,
 ) -> std::result::Result<Minimum, String> {
@@ -113,19 +127,28 @@ pub(super) fn minimize(
     // Jacobian has orthonormal columns, so the Gauss–Newton step is a product. The problem is nearly linear
     // in its small parameters, so Levenberg–Marquardt then only polishes; if the step does not help, it
     // starts from the nominal model instead.
-    problem.set_params(&DVector::zeros(k));
+    problem.start(r0, j0);
     let start_norm = problem.r.norm();
     let gauss_newton = problem
         .small
         .is_some()
         .then(|| -(problem.jz.tr_mul(&problem.r)));
+    // The start's evaluation counts once, here (the rank check's).
     let mut evaluations_before = 1;
     if let Some(z0) = gauss_newton {
+        // The start is kept aside, not evaluated again, should the step not help.
+        let start = (
+            std::mem::replace(&mut problem.r, DVector::zeros(m)),
+            std::mem::replace(&mut problem.j, DMatrix::zeros(m, k)),
+            std::mem::replace(&mut problem.jz, DMatrix::zeros(m, k)),
+            problem.small.take(),
+        );
         problem.set_params(&z0);
         evaluations_before += 1;
         // A NaN norm counts as no improvement.
         if problem.r.norm().partial_cmp(&start_norm) != Some(std::cmp::Ordering::Less) {
-            problem.set_params(&DVector::zeros(k));
+            problem.z.fill(0.0);
+            (problem.r, problem.j, problem.jz, problem.small) = start;
         }
     }
     // The crate's patience counts evaluations in units of (parameters + 1).
