@@ -106,8 +106,20 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     w.write_record(&header).map_err(csv_err)?;
     // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
     // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
+    let placements = model.basis().domain.place_all(
+        model.joint_names(),
+        configurations
+            .iter()
+            .zip(&inputs)
+            .map(|(q, x)| (q.as_slice(), x.as_slice())),
+    );
     let (mut singular, mut outside) = (0, 0);
-    for ((id, q), x) in ids.iter().zip(&configurations).zip(&inputs) {
+    for (((id, q), x), placement) in ids
+        .iter()
+        .zip(&configurations)
+        .zip(&inputs)
+        .zip(&placements)
+    {
         let p = model.predict_with(q, x);
         let r: UnitQuaternion<f64> = p.orientation;
         let pos: Point3<f64> = p.position;
@@ -126,10 +138,9 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
                 row.push(format!("no command: {}", e.detail()));
             }
         }
-        let placement = test_points::place(model.as_ref(), q, x);
         outside += usize::from(!placement.inside);
         row.push(placement.distance_rad.to_string());
-        row.push(test_points::domain_cell(&placement));
+        row.push(test_points::domain_cell(placement));
         w.write_record(&row).map_err(csv_err)?;
     }
     let bytes = w

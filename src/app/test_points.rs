@@ -16,11 +16,6 @@ pub fn domain_cell(p: &Placement) -> String {
     }
 }
 
-/// Where `model` places `q` with `inputs`.
-pub fn place(model: &dyn Fitted, q: &[f64], inputs: &[f64]) -> Placement {
-    model.basis().domain.place(model.joint_names(), q, inputs)
-}
-
 /// Where `model` places each point of `data`.
 pub fn place_all(model: &dyn Fitted, data: &Dataset) -> Vec<Placement> {
     let points = (0..data.len()).map(|i| (data.q[i].as_slice(), data.extra_inputs_of(i)));

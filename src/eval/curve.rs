@@ -216,14 +216,9 @@ pub fn learning_curve(
 
 /// How many points of `test` lie outside `model`'s training domain.
 fn outside_domain(model: &dyn Fitted, test: &Dataset) -> usize {
-    let domain = &model.basis().domain;
-    (0..test.len())
-        .filter(|&i| {
-            !domain
-                .place(model.joint_names(), &test.q[i], test.extra_inputs_of(i))
-                .inside
-        })
-        .count()
+    let points = (0..test.len()).map(|i| (test.q[i].as_slice(), test.extra_inputs_of(i)));
+    let placements = model.basis().domain.place_all(model.joint_names(), points);
+    placements.iter().filter(|p| !p.inside).count()
 }
 
 /// Per method and size: the mean over the successful draws of their held-out means (mm), their min and
