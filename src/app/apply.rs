@@ -62,9 +62,9 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     output::check_dir(&options.out, &[APPLIED])?;
     let model = SavedModel::read(&options.model)?;
     let joint_names = model.joint_names().to_vec();
+    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
     let (ids, configurations) = match &options.mapping {
         Some(path) => {
-            let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
             ColumnMapping::load(path)?.read_joints(&options.data, &joint_names, &prismatic)?
         }
         None => dataset::read_joints(&options.data, &joint_names)?,
@@ -75,7 +75,6 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
         model.input_names(),
         ids.len(),
     )?;
-    let prismatic: Vec<bool> = model.dh().rows.iter().map(|r| r.prismatic).collect();
     JointRange::plausible(&joint_names, &prismatic).check(
         &options.data.display().to_string(),
         &ids,
@@ -84,26 +83,7 @@ pub fn apply(options: &ApplyOptions) -> Result<ApplyOutcome> {
     let out = &options.out.join(APPLIED);
     let mut w = csv::Writer::from_writer(Vec::new());
     let csv_err = |e: csv::Error| Error::Invalid(format!("{}: {e}", out.display()));
-    let mut header: Vec<String> = vec!["point_id".into()];
-    header.extend(joint_names.iter().cloned());
-    header.extend(
-        [
-            "predicted_x",
-            "predicted_y",
-            "predicted_z",
-            "predicted_qw",
-            "predicted_qx",
-            "predicted_qy",
-            "predicted_qz",
-        ]
-        .map(String::from),
-    );
-    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
-    header.push("compensation_residual_m".into());
-    header.push("status".into());
-    header.push("domain_distance_rad".into());
-    header.push("domain".into());
-    w.write_record(&header).map_err(csv_err)?;
+    w.write_record(header(&joint_names)).map_err(csv_err)?;
     // A configuration where the inverse is undefined (a singular pose, such as a straight arm) still gets its
     // prediction; its command cells stay empty and `status` says why, so one such row does not cost the file.
     let placements = model.basis().domain.place_all(
@@ -204,4 +184,28 @@ fn extra_inputs(
                 .collect()
         })
         .collect())
+}
+
+/// The columns of [`APPLIED`].
+fn header(joint_names: &[String]) -> Vec<String> {
+    let mut header: Vec<String> = vec!["point_id".into()];
+    header.extend(joint_names.iter().cloned());
+    header.extend(
+        [
+            "predicted_x",
+            "predicted_y",
+            "predicted_z",
+            "predicted_qw",
+            "predicted_qx",
+            "predicted_qy",
+            "predicted_qz",
+        ]
+        .map(String::from),
+    );
+    header.extend(joint_names.iter().map(|n| format!("cmd_{n}")));
+    header.push("compensation_residual_m".into());
+    header.push("status".into());
+    header.push("domain_distance_rad".into());
+    header.push("domain".into());
+    header
 }
