@@ -245,21 +245,14 @@ impl Block {
     /// Ridge coefficients and the validation SSE they give.
     pub(super) fn solve(&self, target: &Target, alpha: f64) -> (DVector<f64>, f64) {
         let n = self.g.nrows();
-        let shifted = || {
-            let mut a = self.g.clone();
-            for i in 0..n {
-                a[(i, i)] += alpha;
-            }
-            a
-        };
-        let w = match shifted().cholesky() {
+        let w = match self.factor(alpha) {
             Some(ch) => ch.solve(&self.b),
             // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
             // the limit of ridge as α → 0.
             None => {
                 // A Gram matrix that is not finite gives NaN coefficients and a NaN score, which the
                 // search never chooses, rather than an SVD that never returns.
-                match numeric::svd(shifted(), true, true, "ridge") {
+                match numeric::svd(self.shifted(alpha), true, true, "ridge") {
                     Ok(svd) => {
                         let eps = svd.singular_values.max() * n as f64 * f64::EPSILON;
                         svd.solve(&self.b, eps)
@@ -285,7 +278,7 @@ impl Block {
         target: &Target,
         alpha: f64,
         sizes: &[usize],
-        factor: Option<&Cholesky<f64, Dyn>>,
+        factor: Option<&Factor>,
     ) -> Vec<(DVector<f64>, f64)> {
         let Some(ch) = factor else {
             return sizes
@@ -312,12 +305,17 @@ impl Block {
 
     /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal; `None` where it does not
     /// factor.
-    pub(super) fn factor(&self, alpha: f64) -> Option<Cholesky<f64, Dyn>> {
+    pub(super) fn factor(&self, alpha: f64) -> Option<Factor> {
+        self.shifted(alpha).cholesky()
+    }
+
+    /// The training Gram block plus `alpha` on its diagonal.
+    fn shifted(&self, alpha: f64) -> DMatrix<f64> {
         let mut a = self.g.clone();
         for i in 0..a.nrows() {
             a[(i, i)] += alpha;
         }
-        a.cholesky()
+        a
     }
 
     /// The block of the first `m` features.
@@ -345,12 +343,7 @@ pub(super) struct Factors {
 
 impl Factors {
     /// The factor of `block` (on features `idx`) at `alpha`, computed on first use.
-    pub(super) fn get(
-        &mut self,
-        block: &Block,
-        idx: &[usize],
-        alpha: f64,
-    ) -> Option<&Cholesky<f64, Dyn>> {
+    pub(super) fn get(&mut self, block: &Block, idx: &[usize], alpha: f64) -> Option<&Factor> {
         let fit = self.fit;
         let entry = self
             .map

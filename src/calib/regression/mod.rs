@@ -621,6 +621,7 @@ mod tests {
                         sse1.to_bits(),
                         "degree {degree}, α {alpha}, k {k}"
                     );
+                    assert_eq!(w.len(), w1.len());
                     assert!(w.iter().zip(&w1).all(|(a, b)| a.to_bits() == b.to_bits()));
                 }
             }
