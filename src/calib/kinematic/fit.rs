@@ -13,7 +13,6 @@ use super::noise::{self, Noise};
 use super::params::{Param, State, candidates};
 use super::problem::{Point, Problem};
 use super::solve::{self, minimize};
-use crate::calib::error_model::ErrorFrames;
 use crate::calib::method::{FitContext, MethodInfo};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
@@ -283,20 +282,6 @@ fn solve_within_bounds(
             noise,
         });
     }
-}
-
-/// RMS of the 3-D position residual of `state` over `points` (m).
-pub(super) fn rms(dh: &DhChain, state: &State, points: &[Point]) -> f64 {
-    let sum: f64 = points
-        .iter()
-        .map(|pt| {
-            let qd = state.deflected(&pt.q, &pt.tau);
-            let p = ErrorFrames::new(dh, &qd, &state.errors).flange * state.mount;
-            let v = UnitQuaternion::from_scaled_axis(state.rho) * pt.y.coords + state.t;
-            (p.coords - v).norm_squared()
-        })
-        .sum();
-    (sum / points.len() as f64).sqrt()
 }
 
 /// The registration the model keeps: the tracker frame refined by the fitted rotation and translation, the

@@ -263,7 +263,7 @@ impl KinematicModel {
         );
         undetermined.extend(solution.at_bound);
         let state = State::with(&base, &solution.kept, &solution.values);
-        let train_rms = fit::rms(dh, &state, &probe.points);
+        let train_rms = problem::rms(dh, &state, &probe.points);
         if !train_rms.is_finite() || solution.values.iter().any(|v| !v.is_finite()) {
             return Err(Error::Invalid(format!(
                 "{method}: the fit produced non-finite parameters"
@@ -274,7 +274,8 @@ impl KinematicModel {
         } else {
             fit::points(dh, gravity.as_ref(), registration.observe(val)?)
         };
-        let validation_rms = (!val_points.is_empty()).then(|| fit::rms(dh, &state, &val_points));
+        let validation_rms =
+            (!val_points.is_empty()).then(|| problem::rms(dh, &state, &val_points));
         let evaluations = solution.minimum.evaluations;
         let base_error = fit::base_error(&registration, &state);
         Ok(KinematicModel {

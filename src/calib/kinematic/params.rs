@@ -119,16 +119,4 @@ impl State {
         }
         s
     }
-
-    /// Deflected angles for commanded `q` with torques `tau` (no deflection without torques).
-    pub(super) fn deflected(&self, q: &[f64], tau: &[f64]) -> Vec<f64> {
-        if tau.is_empty() {
-            return q.to_vec();
-        }
-        q.iter()
-            .zip(tau)
-            .zip(&self.compliance)
-            .map(|((q, t), c)| q + c * t)
-            .collect()
-    }
 }

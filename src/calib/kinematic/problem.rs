@@ -1,11 +1,11 @@
 //! The least-squares problem shared by the structural analysis, the rank check and Levenberg–Marquardt: the
 //! residuals of the measured points and their analytic Jacobian at the current estimate.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
 
 use super::params::{Param, State};
 use crate::calib::error_model::{ErrorFrames, error_transforms, so3_left_jacobian};
-use crate::robot::dh::DhChain;
+use crate::robot::dh::{DhChain, FixedRotations};
 
 /// What the model knows about each fitted point.
 pub(super) struct Point {
@@ -45,6 +45,63 @@ impl Point {
             links,
         }
     }
+
+    /// The chain's frames with errors at this point into `frames`: from its link transforms where they are
+    /// fixed, else at its angles deflected by `compliance` (into `qd`), with the error transforms
+    /// `transforms` ([`error_transforms`]).
+    pub(super) fn frames_into(
+        &self,
+        dh: &DhChain,
+        compliance: &[f64],
+        fixed: &FixedRotations,
+        transforms: &[Option<Isometry3<f64>>],
+        frames: &mut ErrorFrames,
+        qd: &mut Vec<f64>,
+    ) {
+        if self.links.is_empty() {
+            qd.clear();
+            qd.extend(
+                self.q
+                    .iter()
+                    .zip(&self.tau)
+                    .zip(compliance)
+                    .map(|((q, t), c)| q + c * t),
+            );
+            let links = qd
+                .iter()
+                .enumerate()
+                .map(|(i, &qi)| dh.link_transform_fixed(i, qi, fixed));
+            frames.rebuild(dh, links, transforms);
+        } else {
+            frames.rebuild(dh, self.links.iter().copied(), transforms);
+        }
+    }
+}
+
+/// RMS of the 3-D position residual of `state` over `points` (m).
+pub(super) fn rms(dh: &DhChain, state: &State, points: &[Point]) -> f64 {
+    let transforms = error_transforms(&state.errors);
+    let fixed = dh.fixed_rotations();
+    let rot = UnitQuaternion::from_scaled_axis(state.rho);
+    let mut frames = empty_frames(dh);
+    let mut qd = Vec::with_capacity(dh.dof());
+    let sum: f64 = points
+        .iter()
+        .map(|pt| {
+            pt.frames_into(
+                dh,
+                &state.compliance,
+                &fixed,
+                &transforms,
+                &mut frames,
+                &mut qd,
+            );
+            let p = frames.flange * state.mount;
+            let v = rot * pt.y.coords + state.t;
+            (p.coords - v).norm_squared()
+        })
+        .sum();
+    (sum / points.len() as f64).sqrt()
 }
 
 /// The problem shared by the structural analysis, the rank check and Levenberg–Marquardt.
@@ -82,7 +139,8 @@ impl Problem<'_> {
     }
 
     /// [`Problem::evaluate`] into `r` and `j` (resized where their shapes differ; every entry written), so
-    /// that Levenberg–Marquardt's iterations reuse them.
+    /// that Levenberg–Marquardt's iterations reuse them. Each point's rows are written parameter by
+    /// parameter straight into the buffer, the parameters decoded once per evaluation.
     pub(super) fn evaluate_into(
         &self,
         values: &[f64],
@@ -101,47 +159,22 @@ impl Problem<'_> {
             .map(|e| so3_left_jacobian(&Vector3::new(e[3], e[4], e[5])))
             .collect();
         let transforms = error_transforms(&s.errors);
-        let mut axes: Vec<(Matrix3<f64>, Matrix3<f64>, Point3<f64>)> =
-            vec![(Matrix3::zeros(), Matrix3::zeros(), Point3::origin()); s.errors.len()];
-        let mut frames = ErrorFrames {
-            before: Vec::with_capacity(s.errors.len()),
-            after: Vec::with_capacity(s.errors.len() + 1),
-            flange: self.dh.base,
-        };
+        let mut axes: Vec<Axes> = vec![Axes::default(); s.errors.len()];
+        let mut frames = empty_frames(self.dh);
         let fixed = self.dh.fixed_rotations();
         let fitted = self.fitted_frames(s.errors.len());
+        let columns: Vec<Column> = self.params.iter().map(|&p| Column::of(p)).collect();
         let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
-            if pt.links.is_empty() {
-                qd.clear();
-                qd.extend(
-                    pt.q.iter()
-                        .zip(&pt.tau)
-                        .zip(&s.compliance)
-                        .map(|((q, t), c)| q + c * t),
-                );
-                let links = qd
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &qi)| self.dh.link_transform_fixed(i, qi, &fixed));
-                frames.rebuild(self.dh, links, &transforms);
-            } else {
-                frames.rebuild(self.dh, pt.links.iter().copied(), &transforms);
-            }
-            if j.is_some() {
-                for (i, ((g, e), jl)) in frames
-                    .before
-                    .iter()
-                    .zip(&s.errors)
-                    .zip(&jl_errors)
-                    .enumerate()
-                    .filter(|(i, _)| fitted[*i])
-                {
-                    let r = g.rotation.to_rotation_matrix().into_inner();
-                    axes[i] = (r, r * jl, g * Point3::new(e[0], e[1], e[2]));
-                }
-            }
+            pt.frames_into(
+                self.dh,
+                &s.compliance,
+                &fixed,
+                &transforms,
+                &mut frames,
+                &mut qd,
+            );
             let p = frames.flange * s.mount;
             let v = rot * pt.y.coords;
             r.fixed_rows_mut::<3>(row).copy_from(&(p.coords - v - s.t));
@@ -160,24 +193,40 @@ impl Problem<'_> {
                 }
                 _ => None,
             };
+            let rows = if rotation.is_some() { 6 } else { 3 };
             if let Some(jm) = j.as_mut() {
+                for (i, ((g, e), jl)) in frames
+                    .before
+                    .iter()
+                    .zip(&s.errors)
+                    .zip(&jl_errors)
+                    .enumerate()
+                    .filter(|(i, _)| fitted[*i])
+                {
+                    let r = g.rotation.to_rotation_matrix().into_inner();
+                    let centre = g * Point3::new(e[0], e[1], e[2]);
+                    axes[i] = Axes {
+                        translation: r,
+                        rotation: r * jl,
+                        lever: p - centre,
+                    };
+                }
                 let at = AtPoint {
-                    v,
+                    v_cross: v.cross_matrix(),
                     p,
                     frames: &frames,
                     axes: &axes,
                     rotation: &rotation,
                     tau: &pt.tau,
                 };
-                for (c, prm) in self.params.iter().enumerate() {
-                    let col = self.column(*prm, &jl_rho, &at);
-                    let rows = if rotation.is_some() { 6 } else { 3 };
-                    for k in 0..rows {
-                        jm[(row + k, c)] = col[k];
-                    }
+                let m = jm.nrows();
+                let data = jm.as_mut_slice();
+                for (c, col) in columns.iter().enumerate() {
+                    let start = c * m + row;
+                    self.write_column(*col, &jl_rho, &at, &mut data[start..start + rows]);
                 }
             }
-            row += if rotation.is_some() { 6 } else { 3 };
+            row += rows;
         }
     }
 
@@ -205,41 +254,92 @@ impl Problem<'_> {
         }
     }
 
-    /// The column of parameter `prm` at one point: [linear; angular] residual rows (the angular part used only
-    /// where the point's orientation is fitted).
-    fn column(&self, prm: Param, jl_rho: &Matrix3<f64>, at: &AtPoint) -> Vector6<f64> {
-        match prm {
-            Param::TrackerRotation(k) | Param::BaseRotation(k) => {
-                let lin = at.v.cross_matrix() * jl_rho.column(k);
+    /// The column of one parameter at one point, written into its residual rows `dst`: [linear; angular]
+    /// (the angular part only where the point's orientation is fitted).
+    fn write_column(&self, col: Column, jl_rho: &Matrix3<f64>, at: &AtPoint, dst: &mut [f64]) {
+        let (lin, ang) = match col {
+            Column::TrackerRotation(k) => {
+                let lin = at.v_cross * jl_rho.column(k);
                 let ang = match at.rotation {
                     Some((l, _, jr_inv)) => -(jr_inv * jl_rho.column(k)) * *l,
                     None => Vector3::zeros(),
                 };
-                stack(&lin, &ang)
+                (lin, ang)
             }
-            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
-                stack(&-Vector3::ith(k, 1.0), &Vector3::zeros())
-            }
-            Param::Mounting(k) => stack(
-                &(at.frames.flange.rotation * Vector3::ith(k, 1.0)),
-                &Vector3::zeros(),
+            Column::TrackerTranslation(k) => (-Vector3::ith(k, 1.0), Vector3::zeros()),
+            Column::Mounting(k) => (
+                at.frames.flange.rotation * Vector3::ith(k, 1.0),
+                Vector3::zeros(),
             ),
-            Param::Error(e) => {
-                let (r, u, centre) = &at.axes[e.frame - 1];
-                let k = (e.component - 1) % 3;
-                let col = if e.component <= 3 {
-                    stack(&r.column(k).into_owned(), &Vector3::zeros())
-                } else {
-                    let u = u.column(k).into_owned();
-                    stack(&u.cross(&(at.p - centre)), &u)
-                };
-                flange_column(col, at.rotation)
+            Column::ErrorTranslation(f, k) => {
+                let lin = at.axes[f].translation.column(k).into_owned();
+                flange_column(lin, Vector3::zeros(), at.rotation)
             }
-            Param::Compliance(jt) => flange_column(
-                at.frames.joint_column(self.dh, jt, &at.p) * at.tau[jt],
-                at.rotation,
-            ),
+            Column::ErrorRotation(f, k) => {
+                let a = &at.axes[f];
+                let u = a.rotation.column(k).into_owned();
+                flange_column(u.cross(&a.lever), u, at.rotation)
+            }
+            Column::Compliance(jt) => {
+                let col = at.frames.joint_column(self.dh, jt, &at.p) * at.tau[jt];
+                flange_column(
+                    col.fixed_rows::<3>(0).into_owned(),
+                    col.fixed_rows::<3>(3).into_owned(),
+                    at.rotation,
+                )
+            }
+        };
+        dst[..3].copy_from_slice(lin.as_slice());
+        if dst.len() == 6 {
+            dst[3..].copy_from_slice(ang.as_slice());
         }
+    }
+}
+
+/// How a parameter's column is made, decoded once per evaluation: its kind, and the frame (from 0) and
+/// axis, or the joint, it acts on.
+#[derive(Clone, Copy)]
+enum Column {
+    TrackerRotation(usize),
+    TrackerTranslation(usize),
+    Mounting(usize),
+    ErrorTranslation(usize, usize),
+    ErrorRotation(usize, usize),
+    Compliance(usize),
+}
+
+impl Column {
+    fn of(prm: Param) -> Column {
+        match prm {
+            Param::TrackerRotation(k) | Param::BaseRotation(k) => Column::TrackerRotation(k),
+            Param::TrackerTranslation(k) | Param::BaseTranslation(k) => {
+                Column::TrackerTranslation(k)
+            }
+            Param::Mounting(k) => Column::Mounting(k),
+            Param::Error(e) if e.component <= 3 => {
+                Column::ErrorTranslation(e.frame - 1, e.component - 1)
+            }
+            Param::Error(e) => Column::ErrorRotation(e.frame - 1, e.component - 4),
+            Param::Compliance(jt) => Column::Compliance(jt),
+        }
+    }
+}
+
+/// Per fitted frame at one point: the world axes of its translation errors, those of its rotation errors
+/// (through the rotation error's left Jacobian), and the predicted point's lever about its rotation centre.
+#[derive(Clone, Default)]
+struct Axes {
+    translation: Matrix3<f64>,
+    rotation: Matrix3<f64>,
+    lever: Vector3<f64>,
+}
+
+/// The frames before any point is placed in them.
+fn empty_frames(dh: &DhChain) -> ErrorFrames {
+    ErrorFrames {
+        before: Vec::with_capacity(dh.dof()),
+        after: Vec::with_capacity(dh.dof() + 1),
+        flange: dh.base,
     }
 }
 
@@ -247,30 +347,25 @@ impl Problem<'_> {
 /// the predicted point, the frames with errors, per frame its error axes and rotation centre, the rotation
 /// residual's weight and maps, the gravity torques.
 struct AtPoint<'a> {
-    v: Vector3<f64>,
+    /// The cross-product matrix of the measured point turned by the tracker-frame rotation.
+    v_cross: Matrix3<f64>,
     p: Point3<f64>,
     frames: &'a ErrorFrames,
-    axes: &'a [(Matrix3<f64>, Matrix3<f64>, Point3<f64>)],
+    axes: &'a [Axes],
     rotation: &'a Option<(f64, Matrix3<f64>, Matrix3<f64>)>,
     tau: &'a [f64],
 }
 
-fn stack(lin: &Vector3<f64>, ang: &Vector3<f64>) -> Vector6<f64> {
-    Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
-}
-
-/// A column of the flange's [linear; world angular] motion as residual rows: the angular part mapped through
-/// the rotation residual's inverse left Jacobian and weighted.
+/// A column of the flange's linear and world angular motion as residual rows: the angular part mapped
+/// through the rotation residual's inverse left Jacobian and weighted (read only where it is fitted).
 fn flange_column(
-    col: Vector6<f64>,
+    lin: Vector3<f64>,
+    ang: Vector3<f64>,
     rotation: &Option<(f64, Matrix3<f64>, Matrix3<f64>)>,
-) -> Vector6<f64> {
+) -> (Vector3<f64>, Vector3<f64>) {
     match rotation {
-        Some((l, jl_inv, _)) => {
-            let ang = jl_inv * col.fixed_rows::<3>(3) * *l;
-            stack(&col.fixed_rows::<3>(0).into_owned(), &ang)
-        }
-        None => col,
+        Some((l, jl_inv, _)) => (lin, jl_inv * ang * *l),
+        None => (lin, ang),
     }
 }
 

@@ -1,5 +1,7 @@
 //! Levenberg–Marquardt on the kinematic problem, in whitened coordinates.
 
+use std::cell::Cell;
+
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use serde::{Deserialize, Serialize};
@@ -54,7 +56,24 @@ struct Whitened<'a> {
     /// The small problem at `z`, `None` where the residuals or the Jacobian are not finite. Every point the
     /// crate tries gets its Jacobian, since the small residuals are expressed through it.
     small: Option<Reduced>,
+    /// Whether the crate took the Jacobian at `z`: it does so only at the points it accepts.
+    accepted: Cell<bool>,
+    /// The last accepted point and its evaluation, set aside while the crate tries steps from it: when
+    /// its last try fails it asks for that point again, which is then restored instead of evaluated anew
+    /// (the same computation: the same bits).
+    anchor: Option<Evaluation>,
+    /// Buffers of an evaluation no longer needed, reused by the next one (no new zeroed matrices).
+    spare: Option<Evaluation>,
 }
+
+/// One point's evaluation: `z`, the residuals, the Jacobian unwhitened and whitened, the small problem.
+type Evaluation = (
+    DVector<f64>,
+    DVector<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+    Option<Reduced>,
+);
 
 impl Whitened<'_> {
     fn x(&self) -> DVector<f64> {
@@ -67,9 +86,42 @@ impl Whitened<'_> {
         self.r = r0;
         self.j = j0;
         self.whiten_and_reduce();
+        self.accepted.set(false);
+        self.anchor = None;
+    }
+
+    /// The evaluation at `z` out of the problem, leaving the spare buffers (or empty ones, resized by the
+    /// next evaluation) in its place.
+    fn take(&mut self) -> Evaluation {
+        let k = self.z.len();
+        let spare = self.spare.take().unwrap_or_else(|| {
+            (
+                DVector::zeros(k),
+                DVector::zeros(0),
+                DMatrix::zeros(0, 0),
+                DMatrix::zeros(0, 0),
+                None,
+            )
+        });
+        self.put(spare)
+    }
+
+    /// `evaluation` into the problem; the one it replaces is returned.
+    fn put(&mut self, evaluation: Evaluation) -> Evaluation {
+        let (z, r, j, jz, small) = evaluation;
+        (
+            std::mem::replace(&mut self.z, z),
+            std::mem::replace(&mut self.r, r),
+            std::mem::replace(&mut self.j, j),
+            std::mem::replace(&mut self.jz, jz),
+            std::mem::replace(&mut self.small, small),
+        )
     }
 
     fn whiten_and_reduce(&mut self) {
+        if self.jz.shape() != self.j.shape() {
+            self.jz = DMatrix::zeros(self.j.nrows(), self.j.ncols());
+        }
         self.jz.gemm(1.0, &self.j, self.s, 0.0);
         self.small = reduce(&self.jz, &self.r);
     }
@@ -81,6 +133,22 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
     type ParameterStorage = Owned<f64, Dyn>;
 
     fn set_params(&mut self, z: &DVector<f64>) {
+        let same = |a: &DVector<f64>| {
+            a.iter()
+                .zip(z.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if self.anchor.as_ref().is_some_and(|a| same(&a.0)) {
+            let anchor = self.anchor.take().expect("checked");
+            self.spare = Some(self.put(anchor));
+            self.accepted.set(true);
+            return;
+        }
+        if self.accepted.replace(false) {
+            // The anchor before it is not asked for again: its buffers take the new evaluation.
+            self.spare = self.anchor.take().or(self.spare.take());
+            self.anchor = Some(self.take());
+        }
         self.z.copy_from(z);
         let x = self.x();
         self.problem
@@ -97,6 +165,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.accepted.set(true);
         self.small.as_ref().map(|s| s.jacobian.clone())
     }
 }
@@ -112,16 +181,18 @@ pub(super) fn minimize(
     max_evaluations: usize,
 ) -> std::result::Result<Minimum, String> {
     let k = x0.len();
-    let m = problem.rows();
     let mut problem = Whitened {
         problem,
         x0,
         s,
         z: DVector::zeros(k),
-        r: DVector::zeros(m),
-        j: DMatrix::zeros(m, k),
-        jz: DMatrix::zeros(m, k),
+        r: DVector::zeros(0),
+        j: DMatrix::zeros(0, 0),
+        jz: DMatrix::zeros(0, 0),
         small: None,
+        accepted: Cell::new(false),
+        anchor: None,
+        spare: None,
     };
     // The linearized solution first (classical calibration's first estimate): in whitened coordinates the
     // Jacobian has orthonormal columns, so the Gauss–Newton step is a product. The problem is nearly linear
@@ -137,18 +208,14 @@ pub(super) fn minimize(
     let mut evaluations_before = 1;
     if let Some(z0) = gauss_newton {
         // The start is kept aside, not evaluated again, should the step not help.
-        let start = (
-            std::mem::replace(&mut problem.r, DVector::zeros(m)),
-            std::mem::replace(&mut problem.j, DMatrix::zeros(m, k)),
-            std::mem::replace(&mut problem.jz, DMatrix::zeros(m, k)),
-            problem.small.take(),
-        );
+        let start = problem.take();
         problem.set_params(&z0);
         evaluations_before += 1;
         // A NaN norm counts as no improvement.
         if problem.r.norm().partial_cmp(&start_norm) != Some(std::cmp::Ordering::Less) {
-            problem.z.fill(0.0);
-            (problem.r, problem.j, problem.jz, problem.small) = start;
+            problem.spare = Some(problem.put(start));
+        } else {
+            problem.spare = Some(start);
         }
     }
     // The crate's patience counts evaluations in units of (parameters + 1).
