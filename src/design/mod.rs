@@ -6,11 +6,13 @@
 //! - [`observability`]: the indices of a campaign (O1, O2, O3 and the D-criterion) from that Jacobian;
 //! - [`select`]: D-optimal choice of N configurations from a candidate pool, greedy then DETMAX exchange,
 //!   with low-rank determinant updates;
+//! - [`lazy`]: lazy greedy evaluation for it (gains as upper bounds in a priority queue);
 //! - [`layout`]: that choice as the selector of a campaign's `d-optimal` layout.
 //!
 //! Everything here works on the nominal model: it is what a user knows before measuring.
 
 pub mod layout;
+pub mod lazy;
 pub mod model;
 pub mod observability;
 pub mod select;

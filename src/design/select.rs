@@ -1,5 +1,5 @@
 //! D-optimal choice of N configurations from a candidate pool: greedy forward selection, then DETMAX
-//! exchange (Mitchell 1974), with every step a low-rank update of the information matrix's inverse.
+//! exchange (Mitchell 1974), with low-rank updates of the determinant and lazy evaluation of the gains.
 //!
 //! Each candidate c adds R rows A_c (R = 3 for a point, 6 with orientation) to the stacked Jacobian, so it
 //! adds A_cᵀA_c to the information matrix M. The rank-one determinant update, for R rows at once (the matrix
@@ -9,17 +9,23 @@
 //! - (M ± A_sᵀA_s)⁻¹ = M⁻¹ ∓ U C⁻¹ Uᵀ, U = M⁻¹A_sᵀ, C = I ± D_s;
 //! - every candidate's D_c then changes by ∓ W_c C⁻¹ W_cᵀ, W_c = A_c U.
 //!
-//! So choosing one point costs O(pool · R² k) after an O(k²) update, not a k × k determinant per candidate.
 //! The greedy phase starts from M = δI (δ = [`SelectOptions::ridge`]), the usual way to rank points before N
-//! reaches k / R. The exchange phase adds the best candidate outside the design, then removes the design
-//! point whose removal costs least; it stops when that is the point just added (no exchange of one point
-//! raises the determinant) or after [`SelectOptions::max_exchanges`]. Updates drift; M⁻¹ and every D_c are
-//! recomputed from scratch every [`REFRESH`] updates, and the reported determinant is computed directly.
+//! reaches k / R. Its first steps keep every D_c and update them all by these identities, O(pool · R² k) per
+//! step after an O(k²) update (M⁻¹ and every D_c recomputed from scratch every [`REFRESH`] updates, against
+//! drift). Then it turns lazy ([`super::lazy`]): each gain a bound in a priority queue, only the top computed
+//! afresh from a Cholesky factor of M; the same choices as the plain greedy.
+//!
+//! The exchange phase adds the best candidate outside the design, then removes the design point whose
+//! removal costs least; it stops when that is the point just added (no exchange of one point raises the
+//! determinant) or after [`SelectOptions::max_exchanges`]. It goes on the way the greedy ended: with every
+//! D_c updated, or lazily, the queue filled afresh after each removal (which raises gains above their
+//! bounds). The reported determinant is computed directly.
 //!
 //! Deterministic: ties go to the lower candidate index, and nothing depends on threads.
 
 use nalgebra::{Cholesky, Const, DMatrix, Dyn, OMatrix, SMatrix};
 
+use super::lazy::{Factor, Gain, Lazy, ln_det};
 use super::observability::Indices;
 use crate::error::{Error, Result};
 
@@ -135,14 +141,6 @@ fn stack(rows: &[DMatrix<f64>], chosen: &[usize]) -> DMatrix<f64> {
     j
 }
 
-/// ln det of a small symmetric matrix; −∞ unless positive definite (a removal that would leave the design
-/// singular is never the cheapest).
-fn ln_det<const R: usize>(m: SMatrix<f64, R, R>) -> f64 {
-    m.cholesky().map_or(f64::NEG_INFINITY, |ch| {
-        2.0 * ch.l().diagonal().iter().map(|d| d.ln()).sum::<f64>()
-    })
-}
-
 struct Found {
     design: Vec<usize>,
     greedy: Vec<usize>,
@@ -177,7 +175,7 @@ impl<const R: usize> Search<R> {
         let k = rows[0].ncols();
         let mean_diag = a.iter().map(|m| m.norm_squared()).sum::<f64>() / (a.len() * k) as f64;
         let delta = options.ridge * if mean_diag > 0.0 { mean_diag } else { 1.0 };
-        let mut s = Search {
+        Search {
             delta,
             in_design: vec![false; a.len()],
             design: Vec::new(),
@@ -186,16 +184,11 @@ impl<const R: usize> Search<R> {
             rank: vec![0.0; a.len()],
             since_refresh: 0,
             a,
-        };
-        s.refresh();
-        s
+        }
     }
 
     fn run(mut self, n: usize, options: &SelectOptions) -> Found {
-        for _ in 0..n {
-            let best = self.best_outside();
-            self.update(best, 1.0);
-        }
+        let mut lazy = self.greedy(n);
         let greedy = self.design.clone();
         let mut exchanges = 0;
         // With the whole pool in the design there is nothing to exchange.
@@ -205,14 +198,27 @@ impl<const R: usize> Search<R> {
             0
         };
         for _ in 0..limit {
-            let add = self.best_outside();
-            let gain = self.update(add, 1.0);
-            let remove = self.cheapest_inside().unwrap_or(add);
+            let (add, gain) = match lazy.as_mut() {
+                Some(lazy) => self.add_lazily(lazy),
+                None => {
+                    let add = self.best_outside();
+                    (add, self.update(add, 1.0))
+                }
+            };
+            let remove = self.cheapest_inside(lazy.as_mut()).unwrap_or(add);
             if remove == add {
-                self.update(add, -1.0);
+                match lazy {
+                    Some(_) => self.leave(add),
+                    None => {
+                        self.update(add, -1.0);
+                    }
+                }
                 break;
             }
-            let loss = self.update(remove, -1.0);
+            let loss = match lazy.as_mut() {
+                Some(lazy) => self.remove_lazily(lazy, remove),
+                None => self.update(remove, -1.0),
+            };
             exchanges += 1;
             if gain + loss < options.min_gain {
                 break;
@@ -223,6 +229,86 @@ impl<const R: usize> Search<R> {
             greedy,
             exchanges,
         }
+    }
+
+    /// Adds `n` points to the design, each the candidate outside it whose addition raises ln det M most (ties
+    /// to the lower index). The first steps keep every D_c and update them all (the search's rank-R
+    /// identities): while the design has fewer rows than parameters, each addition closes directions of the
+    /// δ ridge and lowers almost every gain below the best, so lazy bounds would save nothing; up to twice
+    /// as many rows as parameters they still send about half the pool to a fresh computation per step
+    /// (measured on the default study's pools). Once the design has that many rows and the last step's
+    /// bounds would have sent fewer than a [`LAZY_COST`]-th of the outside candidates to a fresh
+    /// computation, the rest is lazy ([`Lazy`]), which it returns for the exchange phase.
+    fn greedy(&mut self, n: usize) -> Option<Lazy> {
+        self.refresh();
+        // Each outside candidate's Cholesky-diagonal product (√det(I + D_c)) at the last step.
+        let mut last = vec![f64::INFINITY; self.a.len()];
+        while self.design.len() < n {
+            let best = self.best_outside();
+            let outside = self.a.len() - self.design.len();
+            let top = self.rank[best];
+            let reached = (last.iter().zip(&self.rank))
+                .filter(|&(l, r)| !r.is_nan() && *l >= top)
+                .count();
+            if reached * LAZY_COST < outside && self.design.len() * R >= 2 * self.m_inv.nrows() {
+                return Some(self.go_lazy(best, n));
+            }
+            last.copy_from_slice(&self.rank);
+            self.update(best, 1.0);
+        }
+        None
+    }
+
+    /// Adds `best` (this step's choice, with every D_c current) and the rest of the `n` points lazily.
+    fn go_lazy(&mut self, best: usize, n: usize) -> Lazy {
+        let gains: Vec<Gain> = (0..self.a.len())
+            .filter(|&c| !self.in_design[c] && c != best)
+            .map(|c| Gain {
+                value: ln_det(SMatrix::<f64, R, R>::identity() + self.d[c]),
+                c,
+            })
+            .collect();
+        self.join(best);
+        let mut lazy = Lazy::new(Factor::of(&self.a, &self.design, self.delta), gains);
+        while self.design.len() < n {
+            self.add_lazily(&mut lazy);
+        }
+        lazy
+    }
+
+    /// Adds the lazy search's best outside candidate; returns it with its gain, the change of ln det M.
+    fn add_lazily(&mut self, lazy: &mut Lazy) -> (usize, f64) {
+        // n < pool whenever a candidate is asked for, so the queue is not empty.
+        let best = lazy.best(&self.a).expect("a candidate outside the design");
+        self.join(best.c);
+        lazy.factor.add(&self.a[best.c]);
+        (best.c, best.value)
+    }
+
+    /// Removes `s` from the design; returns the change of ln det M. A removal raises every gain, so the
+    /// queue's bounds fail: every outside candidate's gain is computed afresh at the new design.
+    fn remove_lazily(&mut self, lazy: &mut Lazy, s: usize) -> f64 {
+        let d = lazy.factor.d::<R>(self.a[s].as_slice());
+        let loss = ln_det(SMatrix::<f64, R, R>::identity() - d);
+        self.leave(s);
+        lazy.factor = Factor::of(&self.a, &self.design, self.delta);
+        let gains: Vec<Gain> = (0..self.a.len())
+            .filter(|&c| !self.in_design[c])
+            .map(|c| lazy.factor.gain(&self.a[c], c))
+            .collect();
+        lazy.evaluations += gains.len();
+        lazy.reset(gains);
+        loss
+    }
+
+    fn join(&mut self, c: usize) {
+        self.in_design[c] = true;
+        self.design.push(c);
+    }
+
+    fn leave(&mut self, c: usize) {
+        self.in_design[c] = false;
+        self.design.retain(|&x| x != c);
     }
 
     /// The candidate outside the design whose addition raises ln det most.
@@ -261,11 +347,16 @@ impl<const R: usize> Search<R> {
         best.0
     }
 
-    /// The design point whose removal lowers ln det least; `None` if every removal would leave M singular.
-    fn cheapest_inside(&self) -> Option<usize> {
+    /// The design point whose removal lowers ln det least (its D_c from `lazy`'s factor, if given, else the
+    /// kept one); `None` if every removal would leave M singular.
+    fn cheapest_inside(&self, mut lazy: Option<&mut Lazy>) -> Option<usize> {
         let mut best = (None, f64::NEG_INFINITY);
         for &c in &self.design {
-            let g = ln_det(SMatrix::<f64, R, R>::identity() - self.d[c]);
+            let d = match lazy.as_mut() {
+                Some(lazy) => lazy.factor.d::<R>(self.a[c].as_slice()),
+                None => self.d[c],
+            };
+            let g = ln_det(SMatrix::<f64, R, R>::identity() - d);
             if g > best.1 {
                 best = (Some(c), g);
             }
@@ -281,11 +372,9 @@ impl<const R: usize> Search<R> {
             2.0 * ch.l().diagonal().iter().map(|d| d.ln()).sum::<f64>()
         });
         if sign > 0.0 {
-            self.in_design[s] = true;
-            self.design.push(s);
+            self.join(s);
         } else {
-            self.in_design[s] = false;
-            self.design.retain(|&x| x != s);
+            self.leave(s);
         }
         self.since_refresh += 1;
         if self.since_refresh >= REFRESH {
@@ -355,6 +444,11 @@ impl<const R: usize> Search<R> {
 /// Rows per candidate up to which nalgebra multiplies an R × k by a k × R matrix column by column, summing
 /// over k in ascending order (from 6 rows on it hands the product to `matrixmultiply`, whose order differs).
 const GEMV_ROWS: usize = 5;
+
+/// How many eager updates of one candidate's D_c a fresh gain ([`Factor::gain`]) is counted as: callgrind, 29
+/// parameters, about 1300 instructions an update against 5700 a gain, and the bounds a lazy step meets are
+/// staler than the last step's, which the count of the rule sees.
+const LAZY_COST: usize = 7;
 
 /// How far below the best determinant a candidate is still ranked by its logarithm (relative): a million
 /// times the roundings that separate the two rankings.
@@ -508,6 +602,69 @@ mod tests {
             let best = s.best_outside();
             assert_eq!(best, full.0);
             s.update(best, 1.0);
+        }
+    }
+
+    /// ln det(δI + JᵀJ) of `design`, directly.
+    fn ridge_logdet(rows: &[DMatrix<f64>], design: &[usize], delta: f64) -> f64 {
+        let j = stack(rows, design);
+        let m = j.transpose() * &j + DMatrix::identity(j.ncols(), j.ncols()) * delta;
+        let l = Cholesky::new(m).expect("δ > 0").l();
+        2.0 * l.diagonal().iter().map(|d| d.ln()).sum::<f64>()
+    }
+
+    #[test]
+    fn lazy_greedy_picks_the_plain_greedys_points() {
+        // The plain greedy: every outside candidate's ln det(δI + JᵀJ) computed directly at every step, the
+        // best taken, ties to the lower index. Pools with exact twins (later copies of earlier candidates)
+        // check the ties.
+        for (r, k, count, n, seed) in [
+            (3, 12, 300, 40, 21),
+            (3, 29, 400, 60, 22),
+            (6, 20, 200, 30, 23),
+        ] {
+            let mut rows = pool(count, r, k, seed);
+            for c in (0..count).step_by(7) {
+                rows.push(rows[c].clone());
+            }
+            let mean = rows.iter().map(|m| m.norm_squared()).sum::<f64>() / (rows.len() * k) as f64;
+            let delta = SelectOptions::default().ridge * mean;
+            let mut plain: Vec<usize> = Vec::new();
+            for _ in 0..n {
+                let mut best = (usize::MAX, f64::NEG_INFINITY);
+                for c in 0..rows.len() {
+                    if plain.contains(&c) {
+                        continue;
+                    }
+                    plain.push(c);
+                    let g = ridge_logdet(&rows, &plain, delta);
+                    plain.pop();
+                    if g > best.1 {
+                        best = (c, g);
+                    }
+                }
+                plain.push(best.0);
+            }
+            macro_rules! lazy {
+                ($R:literal) => {{
+                    // As d_optimal runs it (eager first steps, then lazy where it pays)...
+                    let mut s = Search::<$R>::new(&rows, &SelectOptions::default());
+                    assert!((s.delta - delta).abs() <= 1e-12 * delta);
+                    s.greedy(n);
+                    // ...and lazy from the first point on.
+                    let mut all = Search::<$R>::new(&rows, &SelectOptions::default());
+                    all.refresh();
+                    let first = all.best_outside();
+                    let lazy = all.go_lazy(first, n);
+                    // Lazy bounds did save fresh gains: fewer than the plain greedy's (on these small
+                    // random pools, 26 to 52 %; the study's pools are in docs/speed.md).
+                    assert!(lazy.evaluations < n * rows.len() * 3 / 5, "{}", lazy.evaluations);
+                    (s.design, all.design)
+                }};
+            }
+            let (chosen, all_lazy) = if r == 3 { lazy!(3) } else { lazy!(6) };
+            assert_eq!(chosen, plain, "R = {r}, k = {k}");
+            assert_eq!(all_lazy, plain, "R = {r}, k = {k}, lazy throughout");
         }
     }
 
