@@ -16,6 +16,8 @@
 //! The callers make it well conditioned: the kinematic fit works in coordinates whitened by its starting
 //! Jacobian (columns orthonormal at the start).
 
+use std::cell::RefCell;
+
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{DMatrix, DMatrixView, DVector, Dyn, Owned};
 
@@ -56,56 +58,71 @@ pub fn reduce(j: &DMatrix<f64>, r: &DVector<f64>) -> Option<Reduced> {
     })
 }
 
-/// A tall problem as the crate's small one: at every point the crate tries, the inner problem's residuals and
-/// Jacobian, reduced.
+/// A tall least-squares problem that writes its residuals and Jacobian into buffers kept by the caller, so
+/// an evaluation allocates nothing. Both are functions of the parameters alone.
+pub trait Tall {
+    fn params(&self) -> DVector<f64>;
+    fn set_params(&mut self, x: &DVector<f64>);
+    /// The residuals at the parameters into `r` (resized by the problem when its length is wrong).
+    fn residuals_into(&self, r: &mut DVector<f64>);
+    /// The Jacobian at the parameters into `j` (resized when its shape is wrong). Entries that do not
+    /// depend on the parameters may be left as the last call wrote them.
+    fn jacobian_into(&self, j: &mut DMatrix<f64>);
+}
+
+/// A tall problem as the crate's small one: at every point the crate asks about, the inner problem's
+/// residuals and Jacobian, reduced.
+///
+/// A point is evaluated when the crate first asks for its residuals, not when it is set: when a solve ends on
+/// a failed try the crate's last call sets its last accepted point again (`reset_params_if`), whose
+/// evaluation nothing then reads; that point's parameters are all the caller takes from the solve.
 pub struct Small<P> {
     pub inner: P,
-    small: Option<Reduced>,
+    evaluation: RefCell<Evaluation>,
 }
 
-impl<
-    P: LeastSquaresProblem<
-            f64,
-            Dyn,
-            Dyn,
-            ResidualStorage = Owned<f64, Dyn>,
-            JacobianStorage = Owned<f64, Dyn, Dyn>,
-            ParameterStorage = Owned<f64, Dyn>,
-        >,
-> Small<P>
-{
+/// The buffers of the inner problem and the small problem at its parameters (`None` until evaluated there;
+/// `Some(None)` where the residuals or the Jacobian are not finite).
+#[derive(Default)]
+struct Evaluation {
+    r: DVector<f64>,
+    j: DMatrix<f64>,
+    small: Option<Option<Reduced>>,
+}
+
+impl<P: Tall> Small<P> {
     pub fn new(inner: P) -> Small<P> {
-        let mut s = Small { inner, small: None };
-        s.update();
-        s
+        Small {
+            inner,
+            evaluation: RefCell::new(Evaluation {
+                r: DVector::zeros(0),
+                j: DMatrix::zeros(0, 0),
+                small: None,
+            }),
+        }
     }
 
-    fn update(&mut self) {
-        self.small = match (self.inner.residuals(), self.inner.jacobian()) {
-            (Some(r), Some(j)) => reduce(&j, &r),
-            _ => None,
-        };
+    /// `read` of the small problem at the parameters, evaluated first if it is not yet.
+    fn at_params<T>(&self, read: impl FnOnce(&Reduced) -> T) -> Option<T> {
+        let mut evaluation = self.evaluation.borrow_mut();
+        let e = &mut *evaluation;
+        let small = e.small.get_or_insert_with(|| {
+            self.inner.residuals_into(&mut e.r);
+            self.inner.jacobian_into(&mut e.j);
+            reduce(&e.j, &e.r)
+        });
+        small.as_ref().map(read)
     }
 }
 
-impl<
-    P: LeastSquaresProblem<
-            f64,
-            Dyn,
-            Dyn,
-            ResidualStorage = Owned<f64, Dyn>,
-            JacobianStorage = Owned<f64, Dyn, Dyn>,
-            ParameterStorage = Owned<f64, Dyn>,
-        >,
-> LeastSquaresProblem<f64, Dyn, Dyn> for Small<P>
-{
+impl<P: Tall> LeastSquaresProblem<f64, Dyn, Dyn> for Small<P> {
     type ResidualStorage = Owned<f64, Dyn>;
     type JacobianStorage = Owned<f64, Dyn, Dyn>;
     type ParameterStorage = Owned<f64, Dyn>;
 
     fn set_params(&mut self, x: &DVector<f64>) {
         self.inner.set_params(x);
-        self.update();
+        self.evaluation.get_mut().small = None;
     }
 
     fn params(&self) -> DVector<f64> {
@@ -113,11 +130,11 @@ impl<
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        self.small.as_ref().map(|s| s.residuals.clone())
+        self.at_params(|s| s.residuals.clone())
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        self.small.as_ref().map(|s| s.jacobian.clone())
+        self.at_params(|s| s.jacobian.clone())
     }
 }
 

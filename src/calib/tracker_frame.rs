@@ -13,13 +13,13 @@
 //! rotation `T` from the points), so the observed flange orientation `T·O_i·P⁻¹` agrees with the nominal one on
 //! average and the methods model what varies — exactly where a nest's orientation goes.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use levenberg_marquardt::LevenbergMarquardt;
 use nalgebra::{
-    DMatrix, DVector, Dyn, Isometry3, Matrix3, Owned, Point3, Translation3, UnitQuaternion, Vector3,
+    DMatrix, DVector, Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3,
 };
 use serde::{Deserialize, Serialize};
 
-use super::reduced::Small;
+use super::reduced::{Small, Tall};
 use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -465,11 +465,7 @@ impl RegistrationProblem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for RegistrationProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
+impl Tall for RegistrationProblem<'_> {
     fn set_params(&mut self, x: &DVector<f64>) {
         self.params.copy_from(x);
     }
@@ -478,38 +474,44 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for RegistrationProblem<'_> {
         self.params.clone()
     }
 
-    fn residuals(&self) -> Option<DVector<f64>> {
+    fn residuals_into(&self, r: &mut DVector<f64>) {
         let (t, m) = self.unpack();
-        let mut r = DVector::zeros(3 * self.measured.len());
+        if r.len() != 3 * self.measured.len() {
+            *r = DVector::zeros(3 * self.measured.len());
+        }
         for (i, (y, f)) in self.measured.iter().zip(self.flanges).enumerate() {
             r.fixed_rows_mut::<3>(3 * i).copy_from(&(t * y - f * m));
         }
-        Some(r)
     }
 
     /// Exact in the translation and mounting; in the rotation, the derivative of a left perturbation at the
-    /// current estimate, which is the true one to first order in the (micro-radian) correction.
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let (t, _) = self.unpack();
-        let mut j = DMatrix::zeros(3 * self.measured.len(), self.params.len());
-        for (i, (y, f)) in self.measured.iter().zip(self.flanges).enumerate() {
-            let v = t.rotation * y.coords;
-            j.fixed_view_mut::<3, 3>(3 * i, 0)
-                .copy_from(&(-v.cross_matrix()));
-            j.fixed_view_mut::<3, 3>(3 * i, 3)
-                .copy_from(&Matrix3::identity());
-            let r = f.rotation.to_rotation_matrix().into_inner();
-            match self.directions {
-                None => j.fixed_view_mut::<3, 3>(3 * i, 6).copy_from(&(-r)),
-                Some(d) => {
-                    for (k, u) in d.iter().enumerate() {
-                        j.fixed_view_mut::<3, 1>(3 * i, 6 + k)
-                            .copy_from(&(-(r * u)));
+    /// current estimate, which is the true one to first order in the (micro-radian) correction. The
+    /// translation's and the mounting's columns do not depend on the parameters: written once per buffer.
+    fn jacobian_into(&self, j: &mut DMatrix<f64>) {
+        let shape = (3 * self.measured.len(), self.params.len());
+        if j.shape() != shape {
+            *j = DMatrix::zeros(shape.0, shape.1);
+            for (i, f) in self.flanges.iter().enumerate() {
+                j.fixed_view_mut::<3, 3>(3 * i, 3)
+                    .copy_from(&Matrix3::identity());
+                let r = f.rotation.to_rotation_matrix().into_inner();
+                match self.directions {
+                    None => j.fixed_view_mut::<3, 3>(3 * i, 6).copy_from(&(-r)),
+                    Some(d) => {
+                        for (k, u) in d.iter().enumerate() {
+                            j.fixed_view_mut::<3, 1>(3 * i, 6 + k)
+                                .copy_from(&(-(r * u)));
+                        }
                     }
                 }
             }
         }
-        Some(j)
+        let (t, _) = self.unpack();
+        for (i, y) in self.measured.iter().enumerate() {
+            let v = t.rotation * y.coords;
+            j.fixed_view_mut::<3, 3>(3 * i, 0)
+                .copy_from(&(-v.cross_matrix()));
+        }
     }
 }
 
@@ -568,6 +570,40 @@ mod tests {
         assert!((t.rotation * truth.rotation.inverse()).angle() < 1e-5);
         // The residual is the noise: 15 µm per axis, √3·15 µm in 3-D.
         assert!(fit.rms > 15e-6 && fit.rms < 35e-6, "rms {}", fit.rms);
+    }
+
+    /// A reused Jacobian buffer, whose constant columns are written once, holds the same bits as a fresh one.
+    #[test]
+    fn a_reused_jacobian_buffer_is_a_fresh_one() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let f = flanges(20, &mut rng);
+        let y: Vec<Point3<f64>> = f
+            .iter()
+            .map(|fi| fi * Point3::new(0.01, 0.0, 0.03))
+            .collect();
+        let directions = [Vector3::x(), Vector3::z()];
+        for directions in [None, Some(&directions[..])] {
+            let mut problem = RegistrationProblem {
+                measured: &y,
+                flanges: &f,
+                base_rotation: UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3),
+                mounting: Point3::new(0.0, 0.0, 0.03),
+                directions,
+                params: DVector::from_fn(6 + directions.map_or(3, |d| d.len()), |k, _| {
+                    0.01 * k as f64
+                }),
+            };
+            let mut reused = DMatrix::zeros(0, 0);
+            problem.jacobian_into(&mut reused);
+            let moved = problem.params.map(|p| p + 0.3);
+            problem.set_params(&moved);
+            problem.jacobian_into(&mut reused);
+            let mut fresh = DMatrix::zeros(0, 0);
+            problem.jacobian_into(&mut fresh);
+            let bits = |m: &DMatrix<f64>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&reused), bits(&fresh));
+            assert_eq!(reused.shape(), (60, problem.params.len()));
+        }
     }
 
     #[test]
