@@ -557,7 +557,9 @@ impl Walk<'_> {
             (&mut self.linear.c, (&a.c, &b.c)),
             (&mut self.linear.s, (&a.s, &b.s)),
         ] {
-            for ((o, x), y) in out.iter_mut().zip(a.iter()).zip(b.iter()) {
+            // Over the contiguous storage: nalgebra's element iterators cost more than the arithmetic.
+            let (a, b) = (a.as_slice(), b.as_slice());
+            for ((o, x), y) in out.as_mut_slice().iter_mut().zip(a).zip(b) {
                 *o = x + w * (y - x);
             }
         }
