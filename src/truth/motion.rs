@@ -22,12 +22,15 @@
 //! the quasi-static deflection, so that a still arm settles exactly where the static path puts it and a moving
 //! one lags and rings about it. That system is integrated by the trapezoidal rule (Newmark's average
 //! acceleration: no numerical damping, second order) at steps of at most [`MOTION_STEP_S`], with M, A and B
-//! refreshed every [`RELINEARIZE_S`] of path. The rapier f64 multibody ([`super::physics_motion`]) integrates
+//! computed every [`RELINEARIZE_S`] of path and interpolated between, and δ_s solved every [`KNOT_S`] and at each
+//! sample, interpolated by a cubic between where it is smooth. The rapier f64 multibody ([`super::physics_motion`]) integrates
 //! the full nonlinear model; `tests/motion.rs` holds the two together to 5 µm at the flange.
 //!
 //! The controller logs its motor encoders: the motor angle it reads back is the command it tracked, so a servo
 //! lag between command and motor does not enter a (logged angles, measured point) pair; the clock offset between
 //! the controller's log and the tracker's does, and is the tracker's concern ([`crate::tracker::motion`]).
+
+use std::collections::VecDeque;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 use rand_chacha::ChaCha8Rng;
@@ -41,13 +44,37 @@ use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
 /// ~400 Hz) are barely excited by a smooth path and stay near their quasi-static answer. Measured in
-/// `tests/motion.rs` against an f64 integration of the full model: 3.0 µm at most at 2 ms, 2.3 µm at 1 ms,
-/// 2.1 µm at 0.25 ms (the rest is the linearisation), each halving doubling the cost.
+/// `tests/motion.rs` against an f64 integration of the full model, with δ_s and the matrices taken as below:
+/// 1.71 µm at most at 2 ms (the two references are 1.68 µm apart); a 4 ms step missed by 6.9 µm.
 pub const MOTION_STEP_S: f64 = 2e-3;
 
-/// How long the mass matrix and the torque's sensitivities are kept (s of path): they change with the posture,
-/// a few per cent over this at full speed, and only the small dynamic remainder depends on them.
-pub const RELINEARIZE_S: f64 = 0.02;
+/// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`] runs on the grid k · KNOT_S
+/// of path time and at every sample; the integration's nodes between take δ_s from the cubic through the four
+/// nearest grid solves. Within a path's quintic segment the command's acceleration is a cubic in time and δ_s
+/// (the inverse-dynamics torque through the springs) is smooth; where it is not, the nodes solve exactly: the
+/// command's accelerations miss the same cubic by more than [`ACCELERATION_TOL`] (a waypoint, where the jerk
+/// jumps, or the path's ends), a joint reverses (lost motion moves θ and the torque with it) or a spring's torque
+/// changes segment of its soft-zone curve between the four solves. Measured (see docs/speed.md): the cubic misses
+/// the exact δ_s by 1.4e-9 rad at most along `tests/motion.rs`'s move, 2.3e-7 rad along a full-speed path of the
+/// default scenario (its gear's wave at 160 and 320 cycles a turn, faster than the grid); 20 ms knots gave
+/// 2.2e-8 and 3.6e-7 rad for no less work (more nodes fall back to exact solves).
+pub const KNOT_S: f64 = 0.01;
+
+/// How far apart (in [`KNOT_S`] grid steps) the mass matrix and the torque's sensitivities are computed at the
+/// grid's solves; the nodes between take them interpolated linearly in time. They change with the posture, a
+/// few per cent over 20 ms at full speed, and only the small dynamic remainder depends on them. In
+/// `tests/motion.rs` (flange against rapier / the f64 Runge–Kutta): 40 ms 2.13 / 1.71 µm, 80 ms 2.70 / 2.22 µm,
+/// 160 ms 5.08 / 4.61 µm; holding each for 20 ms instead, as before, gave 3.42 / 2.99 µm.
+pub const RELINEARIZE_KNOTS: i64 = 4;
+
+/// [`RELINEARIZE_KNOTS`] in seconds of path.
+pub const RELINEARIZE_S: f64 = KNOT_S * RELINEARIZE_KNOTS as f64;
+
+/// How far the command's accelerations at a node may miss the cubic through the grid's four (rad/s²) for the
+/// node to take δ_s from the cubic: within a quintic segment they miss by rounding (~1e-15), across a waypoint
+/// by the jump of the jerk times a fraction of the grid step (~1e-2). Through a joint's compliance times its
+/// inertia (≲ 1e-3 s²) a miss of this size is ≲ 1e-9 rad of δ_s.
+pub const ACCELERATION_TOL: f64 = 1e-6;
 
 /// One commanded sample of a joint-space path: time (s), angles (rad), velocities (rad/s), accelerations
 /// (rad/s²), controller coordinates.
@@ -86,11 +113,6 @@ struct Remainder {
     z: DVector<f64>,
     v: DVector<f64>,
     a: DVector<f64>,
-    quasi_static: DVector<f64>,
-    /// The node before the last: its time and quasi-static deflection (for the next solve's first guess).
-    before: Option<(f64, DVector<f64>)>,
-    linear: Linear,
-    linearized_at: f64,
     /// Scratch of [`Remainder::step`], kept between nodes.
     scratch: Scratch,
 }
@@ -100,6 +122,32 @@ struct Scratch {
     x: DVector<f64>,
     product: DVector<f64>,
     matrix: DMatrix<f64>,
+}
+
+/// One exact quasi-static solve on the grid of [`KNOT_S`].
+struct Knot {
+    index: i64,
+    quasi_static: DVector<f64>,
+    tilt: Vec<Vector3<f64>>,
+    /// The direction each joint last moved in there.
+    direction: Vec<f64>,
+    /// Each joint's spring slope there: which segment of its soft-zone curve the torque is on.
+    slopes: Vec<f64>,
+    /// The commanded accelerations there (rad/s²).
+    qdd: Vec<f64>,
+}
+
+/// The grid's solves around the walk's node, solved ahead of it in time order with their own history of
+/// directions, and the linearisations at every [`RELINEARIZE_KNOTS`]-th of them.
+struct Grid {
+    state: TrueState,
+    visit: Visit,
+    /// From the knot before the current node's grid interval on, in index order.
+    knots: VecDeque<Knot>,
+    /// The next knot to solve (`None` before the first).
+    next: Option<i64>,
+    /// The linearisations (knot index, matrices) from the last at or before the current node on.
+    linear: VecDeque<(i64, Linear)>,
 }
 
 /// The settled arm at a sample, before repeatability noise.
@@ -141,24 +189,10 @@ impl TrueRobot {
                 "motion: sample time {t} s is not a finite number"
             )));
         }
-        let n = self.chain.dof();
         let mut order: Vec<usize> = (0..times.len()).collect();
         order.sort_by(|&a, &b| times[a].total_cmp(&times[b]));
         let damping = self.transmission_damping();
-        let mut walk = Walk {
-            robot: self,
-            path,
-            damping: &damping,
-            state: TrueState::new(self),
-            still: TrueState::new(self),
-            visit: Visit {
-                direction: vec![1.0; n],
-                temperature: None,
-            },
-            remainder: None,
-            ws: Workspace::new(&self.chain),
-            frames: Frames::new(&self.chain),
-        };
+        let mut walk = Walk::new(self, path, &damping);
         let mut reached: Vec<Option<Reached>> = (0..times.len()).map(|_| None).collect();
         let mut last: Option<f64> = None;
         for &i in &order {
@@ -168,10 +202,10 @@ impl TrueRobot {
                 let gap = target - previous;
                 let steps = (gap / step_s).ceil() as usize;
                 for k in 1..steps {
-                    walk.advance(previous + gap * k as f64 / steps as f64)?;
+                    walk.advance(previous + gap * k as f64 / steps as f64, false)?;
                 }
             }
-            walk.advance(target)?;
+            walk.advance(target, true)?;
             reached[i] = Some(walk.reached()?);
             last = Some(target);
         }
@@ -272,91 +306,123 @@ struct Walk<'a> {
     robot: &'a TrueRobot,
     path: &'a dyn Fn(f64) -> PathPoint,
     damping: &'a [f64],
-    /// The quasi-static solve at the current node.
+    /// The quasi-static solve at the last node solved exactly.
     state: TrueState,
     /// The static solve at the same command (for the dynamic part's size).
     still: TrueState,
     /// The direction each joint last moved in and the links' temperature, at the current node.
     visit: Visit,
+    grid: Grid,
     remainder: Option<Remainder>,
+    /// The quasi-static deflection and tilts at the current node (interpolated, then solved where exact).
+    quasi_static: DVector<f64>,
+    tilt: Vec<Vector3<f64>>,
+    /// What the command's accelerations miss the grid's cubic by at the current node (rad/s²).
+    accel: Vec<f64>,
+    /// The linearisation at the current node, interpolated between the grid's.
+    linear: Linear,
     ws: Workspace,
     frames: Frames,
 }
 
+/// The command at `t`, checked against the robot's joint count.
+fn command(path: &dyn Fn(f64) -> PathPoint, n: usize, t: f64) -> Result<PathPoint> {
+    let p = path(t);
+    if p.q.len() != n || p.qd.len() != n || p.qdd.len() != n {
+        return Err(Error::Invalid(format!(
+            "motion: the path gives {} angles at t = {t} s, the robot has {n} joints",
+            p.q.len()
+        )));
+    }
+    Ok(p)
+}
+
+/// A joint at rest keeps the direction it last moved in.
+fn turn(visit: &mut Visit, qd: &[f64]) {
+    for (d, v) in visit.direction.iter_mut().zip(qd) {
+        if *v != 0.0 {
+            *d = v.signum();
+        }
+    }
+}
+
 impl Walk<'_> {
-    /// Moves to time `t`: the quasi-static solve there, then one trapezoidal step of the deflection.
-    fn advance(&mut self, t: f64) -> Result<()> {
-        let robot = self.robot;
-        let p = (self.path)(t);
+    fn new<'a>(
+        robot: &'a TrueRobot,
+        path: &'a dyn Fn(f64) -> PathPoint,
+        damping: &'a [f64],
+    ) -> Walk<'a> {
         let n = robot.chain.dof();
-        if p.q.len() != n || p.qd.len() != n || p.qdd.len() != n {
-            return Err(Error::Invalid(format!(
-                "motion: the path gives {} angles at t = {t} s, the robot has {n} joints",
-                p.q.len()
-            )));
+        let visit = || Visit {
+            direction: vec![1.0; n],
+            temperature: None,
+        };
+        let zeros = || DMatrix::zeros(n, n);
+        Walk {
+            robot,
+            path,
+            damping,
+            state: TrueState::new(robot),
+            still: TrueState::new(robot),
+            visit: visit(),
+            grid: Grid {
+                state: TrueState::new(robot),
+                visit: visit(),
+                knots: VecDeque::new(),
+                next: None,
+                linear: VecDeque::new(),
+            },
+            remainder: None,
+            quasi_static: DVector::zeros(n),
+            tilt: vec![Vector3::zeros(); n],
+            accel: vec![0.0; n],
+            linear: Linear {
+                m: zeros(),
+                c: zeros(),
+                s: zeros(),
+            },
+            ws: Workspace::new(&robot.chain),
+            frames: Frames::new(&robot.chain),
         }
-        for (d, v) in self.visit.direction.iter_mut().zip(&p.qd) {
-            if *v != 0.0 {
-                *d = v.signum();
+    }
+
+    /// Moves to time `t`: the quasi-static deflection there — from the grid's solves, or solved when `exact`
+    /// or where the grid's cubic does not hold — then one trapezoidal step of the deflection.
+    fn advance(&mut self, t: f64, exact: bool) -> Result<()> {
+        let robot = self.robot;
+        let n = robot.chain.dof();
+        let p = command(self.path, n, t)?;
+        turn(&mut self.visit, &p.qd);
+        let here = (t / KNOT_S).floor() as i64;
+        self.solve_through(here)?;
+        let smooth = self.interpolate(t, here, &p.qdd);
+        if exact || !smooth {
+            self.visit.temperature = robot
+                .perturbation
+                .thermal
+                .as_ref()
+                .map(|th| th.temperature_at(t));
+            let state = &mut self.state;
+            robot.unloaded_angles_after(&p.q, &self.visit, &mut state.q0);
+            state.scale = robot.length_scale(&self.visit);
+            // From the grid's cubic: a fraction of the iterations.
+            for ((q, q0), d) in state.q.iter_mut().zip(&state.q0).zip(&self.quasi_static) {
+                *q = q0 - d;
+            }
+            state.tilt.copy_from_slice(&self.tilt);
+            robot.deflect_from_guess(state, Some((&p.qd[..], &p.qdd[..])))?;
+            for ((d, q0), q) in self.quasi_static.iter_mut().zip(&state.q0).zip(&state.q) {
+                *d = q0 - q;
             }
         }
-        self.visit.temperature = robot
-            .perturbation
-            .thermal
-            .as_ref()
-            .map(|th| th.temperature_at(t));
-        let visit = &self.visit;
-        let state = &mut self.state;
-        robot.unloaded_angles_after(&p.q, visit, &mut state.q0);
-        state.scale = robot.length_scale(visit);
-        match &self.remainder {
-            // From the last nodes' deflection, extrapolated along its trend, and the last tilt.
-            Some(r) => {
-                let trend = match &r.before {
-                    Some((t_before, before)) if r.t > *t_before => {
-                        Some(((t - r.t) / (r.t - t_before), before))
-                    }
-                    _ => None,
-                };
-                for (j, (q, q0)) in state.q.iter_mut().zip(&state.q0).enumerate() {
-                    let d = r.quasi_static[j];
-                    let ahead = trend.map_or(0.0, |(f, before)| f * (d - before[j]));
-                    *q = q0 - d - ahead;
-                }
-                robot.deflect_from_guess(state, Some((&p.qd[..], &p.qdd[..])))?;
-            }
+        self.interpolate_linear(t);
+        match &mut self.remainder {
             None => {
-                robot.deflect_moving(state, Some((&p.qd[..], &p.qdd[..])))?;
-            }
-        }
-        let quasi_static =
-            DVector::from_iterator(n, state.q0.iter().zip(&state.q).map(|(q0, q)| q0 - q));
-        let stale = self
-            .remainder
-            .as_ref()
-            .is_none_or(|r| t - r.linearized_at >= RELINEARIZE_S);
-        let linear = stale.then(|| {
-            robot.linearize(
-                state,
-                &p.qd,
-                &p.qdd,
-                self.damping,
-                &mut self.ws,
-                &mut self.frames,
-            )
-        });
-        match (&mut self.remainder, linear) {
-            (None, linear) => {
-                let linear = linear.expect("a first node is always linearised");
                 self.remainder = Some(Remainder {
                     t,
-                    z: quasi_static.clone(),
+                    z: self.quasi_static.clone(),
                     v: DVector::zeros(n),
                     a: DVector::zeros(n),
-                    quasi_static,
-                    before: None,
-                    linear,
-                    linearized_at: t,
                     scratch: Scratch {
                         x: DVector::zeros(n),
                         product: DVector::zeros(n),
@@ -364,23 +430,139 @@ impl Walk<'_> {
                     },
                 });
             }
-            (Some(r), linear) => {
-                if let Some(linear) = linear {
-                    // The acceleration at the last node, consistent with the new matrices.
-                    let force = &linear.s * (&r.quasi_static - &r.z) - &linear.c * &r.v;
-                    r.a = linear
-                        .m
-                        .clone()
-                        .lu()
-                        .solve(&force)
-                        .ok_or_else(|| singular(t))?;
-                    r.linear = linear;
-                    r.linearized_at = t;
-                }
-                r.step(t, &quasi_static)?;
-            }
+            Some(r) => r.step(t, &self.quasi_static, &self.linear)?,
         }
         Ok(())
+    }
+
+    /// Solves the grid's knots a node in grid interval `here` needs: the two on each side of it and the next
+    /// linearisation; drops those behind.
+    fn solve_through(&mut self, here: i64) -> Result<()> {
+        let linear_here = here.div_euclid(RELINEARIZE_KNOTS) * RELINEARIZE_KNOTS;
+        let last = (here + 2).max(linear_here + RELINEARIZE_KNOTS);
+        let mut next = *self.grid.next.get_or_insert((here - 1).min(linear_here));
+        while next <= last {
+            self.solve_knot(next)?;
+            next += 1;
+            self.grid.next = Some(next);
+        }
+        let grid = &mut self.grid;
+        while grid.knots.front().is_some_and(|k| k.index < here - 1) {
+            grid.knots.pop_front();
+        }
+        while grid.linear.get(1).is_some_and(|l| l.0 <= linear_here) {
+            grid.linear.pop_front();
+        }
+        Ok(())
+    }
+
+    /// The exact quasi-static solve at knot `index`, from the last knots' trend, and its linearisation on
+    /// every [`RELINEARIZE_KNOTS`]-th knot.
+    fn solve_knot(&mut self, index: i64) -> Result<()> {
+        let robot = self.robot;
+        let n = robot.chain.dof();
+        let t = index as f64 * KNOT_S;
+        let p = command(self.path, n, t)?;
+        let grid = &mut self.grid;
+        turn(&mut grid.visit, &p.qd);
+        grid.visit.temperature = robot
+            .perturbation
+            .thermal
+            .as_ref()
+            .map(|th| th.temperature_at(t));
+        let state = &mut grid.state;
+        robot.unloaded_angles_after(&p.q, &grid.visit, &mut state.q0);
+        state.scale = robot.length_scale(&grid.visit);
+        let motion = Some((&p.qd[..], &p.qdd[..]));
+        let mut behind = grid.knots.iter().rev();
+        match (behind.next(), behind.next()) {
+            (Some(last), before) => {
+                for (j, (q, q0)) in state.q.iter_mut().zip(&state.q0).enumerate() {
+                    let d = last.quasi_static[j];
+                    let ahead = before.map_or(0.0, |b| d - b.quasi_static[j]);
+                    *q = q0 - d - ahead;
+                }
+                robot.deflect_from_guess(state, motion)?;
+            }
+            (None, _) => {
+                robot.deflect_moving(state, motion)?;
+            }
+        }
+        let quasi_static =
+            DVector::from_iterator(n, state.q0.iter().zip(&state.q).map(|(q0, q)| q0 - q));
+        let slopes = (0..n)
+            .map(|i| robot.tangent_stiffness(i, state.tau()[i]))
+            .collect();
+        if index.rem_euclid(RELINEARIZE_KNOTS) == 0 {
+            let linear = robot.linearize(
+                state,
+                &p.qd,
+                &p.qdd,
+                self.damping,
+                &mut self.ws,
+                &mut self.frames,
+            );
+            grid.linear.push_back((index, linear));
+        }
+        grid.knots.push_back(Knot {
+            index,
+            quasi_static,
+            tilt: state.tilt.clone(),
+            direction: grid.visit.direction.clone(),
+            slopes,
+            qdd: p.qdd,
+        });
+        Ok(())
+    }
+
+    /// The cubic through the four knots about `t` (grid interval `here`) into the quasi-static deflection and
+    /// tilts of the node: whether it holds there, i.e. the four knots and the node move each joint in the same
+    /// direction, load each spring on the same segment of its curve, and the same cubic gives the command's
+    /// accelerations `qdd` at the node.
+    fn interpolate(&mut self, t: f64, here: i64, qdd: &[f64]) -> bool {
+        let u = t / KNOT_S - here as f64;
+        // Lagrange's weights on the knots at −1, 0, 1, 2.
+        let weights = [
+            -u * (u - 1.0) * (u - 2.0) / 6.0,
+            (u + 1.0) * (u - 1.0) * (u - 2.0) / 2.0,
+            -(u + 1.0) * u * (u - 2.0) / 2.0,
+            (u + 1.0) * u * (u - 1.0) / 6.0,
+        ];
+        let knots = self.grid.knots.range(..4);
+        self.quasi_static.fill(0.0);
+        self.tilt.fill(Vector3::zeros());
+        let mut smooth = true;
+        let accel = &mut self.accel;
+        accel.copy_from_slice(qdd);
+        for (knot, w) in knots.zip(weights) {
+            for (a, b) in accel.iter_mut().zip(&knot.qdd) {
+                *a -= w * b;
+            }
+            self.quasi_static.axpy(w, &knot.quasi_static, 1.0);
+            for (out, tilt) in self.tilt.iter_mut().zip(&knot.tilt) {
+                *out += tilt * w;
+            }
+            smooth &=
+                knot.direction == self.visit.direction && knot.slopes == self.grid.knots[0].slopes;
+        }
+        smooth && accel.iter().all(|a| a.abs() <= ACCELERATION_TOL)
+    }
+
+    /// The grid's linearisations about `t`, interpolated linearly in time.
+    fn interpolate_linear(&mut self, t: f64) {
+        let [(ia, a), (ib, b)] = [&self.grid.linear[0], &self.grid.linear[1]];
+        let w = (t / KNOT_S - *ia as f64) / (ib - ia) as f64;
+        for (out, (a, b)) in [
+            (&mut self.linear.m, (&a.m, &b.m)),
+            (&mut self.linear.c, (&a.c, &b.c)),
+            (&mut self.linear.s, (&a.s, &b.s)),
+        ] {
+            // Over the contiguous storage: nalgebra's element iterators cost more than the arithmetic.
+            let (a, b) = (a.as_slice(), b.as_slice());
+            for ((o, x), y) in out.as_mut_slice().iter_mut().zip(a).zip(b) {
+                *o = x + w * (y - x);
+            }
+        }
     }
 
     /// The arm at the current node: the link angles `θ − z` with the quasi-static tilt, and how far the motion
@@ -431,10 +613,10 @@ impl Remainder {
     /// In place, in the order of the expressions `s δ + M (z a₀ + v 4/h + a) + C (z a₁ + v)` and
     /// `S + C a₁ + M a₀` (each product whole before it is added): the bits of the allocating form, without its
     /// dozen allocations per node.
-    fn step(&mut self, t: f64, quasi_static: &DVector<f64>) -> Result<()> {
+    fn step(&mut self, t: f64, quasi_static: &DVector<f64>, linear: &Linear) -> Result<()> {
         let h = t - self.t;
         if h > 0.0 {
-            let Linear { m, c, s } = &self.linear;
+            let Linear { m, c, s } = linear;
             let Scratch { x, product, matrix } = &mut self.scratch;
             let (a0, a1) = (4.0 / (h * h), 2.0 / h);
             let mut rhs = s * quasi_static;
@@ -467,15 +649,7 @@ impl Remainder {
                 *v = d * a1 - *v;
             }
             self.z = z;
-            let before = self
-                .before
-                .get_or_insert_with(|| (0.0, DVector::zeros(quasi_static.len())));
-            before.0 = self.t;
-            std::mem::swap(&mut before.1, &mut self.quasi_static);
-            self.quasi_static.copy_from(quasi_static);
             self.t = t;
-        } else {
-            self.quasi_static.copy_from(quasi_static);
         }
         Ok(())
     }
