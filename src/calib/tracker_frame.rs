@@ -410,6 +410,10 @@ fn fit_frame(
             }
             DVector::from_vec(p)
         },
+        rotations: flanges
+            .iter()
+            .map(|f| f.rotation.to_rotation_matrix().into_inner())
+            .collect(),
     };
     let (small, report) = LevenbergMarquardt::new()
         .with_patience(200)
@@ -444,6 +448,8 @@ struct RegistrationProblem<'a> {
     mounting: Point3<f64>,
     directions: Option<&'a [Vector3<f64>]>,
     params: DVector<f64>,
+    /// The flanges' rotation matrices, which the Jacobian reads at every evaluation.
+    rotations: Vec<Matrix3<f64>>,
 }
 
 impl RegistrationProblem<'_> {
@@ -491,25 +497,47 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for RegistrationProblem<'_> {
     /// current estimate, which is the true one to first order in the (micro-radian) correction.
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         let (t, _) = self.unpack();
-        let mut j = DMatrix::zeros(3 * self.measured.len(), self.params.len());
-        for (i, (y, f)) in self.measured.iter().zip(self.flanges).enumerate() {
-            let v = t.rotation * y.coords;
-            j.fixed_view_mut::<3, 3>(3 * i, 0)
-                .copy_from(&(-v.cross_matrix()));
-            j.fixed_view_mut::<3, 3>(3 * i, 3)
-                .copy_from(&Matrix3::identity());
-            let r = f.rotation.to_rotation_matrix().into_inner();
-            match self.directions {
-                None => j.fixed_view_mut::<3, 3>(3 * i, 6).copy_from(&(-r)),
-                Some(d) => {
-                    for (k, u) in d.iter().enumerate() {
-                        j.fixed_view_mut::<3, 1>(3 * i, 6 + k)
-                            .copy_from(&(-(r * u)));
+        let rows = 3 * self.measured.len();
+        let cols = self.params.len();
+        let v: Vec<Vector3<f64>> = self
+            .measured
+            .iter()
+            .map(|y| t.rotation * y.coords)
+            .collect();
+        // Column by column into one buffer, every entry written once (no zeroed matrix first): the same
+        // entries as the 3 × 3 blocks `−[v]×`, `I` and `−R` (or `−R·u`), signed zeros included.
+        let mut data = Vec::with_capacity(rows * cols);
+        for c in 0..3 {
+            for v in &v {
+                let m = -v.cross_matrix();
+                data.extend_from_slice(&[m[(0, c)], m[(1, c)], m[(2, c)]]);
+            }
+        }
+        for c in 0..3 {
+            let e = Vector3::ith(c, 1.0);
+            for _ in &v {
+                data.extend_from_slice(e.as_slice());
+            }
+        }
+        match self.directions {
+            None => {
+                for c in 0..3 {
+                    for r in &self.rotations {
+                        let m = -r;
+                        data.extend_from_slice(&[m[(0, c)], m[(1, c)], m[(2, c)]]);
+                    }
+                }
+            }
+            Some(d) => {
+                for u in d {
+                    for r in &self.rotations {
+                        let m = -(r * u);
+                        data.extend_from_slice(&[m.x, m.y, m.z]);
                     }
                 }
             }
         }
-        Some(j)
+        Some(DMatrix::from_vec(rows, cols, data))
     }
 }
 

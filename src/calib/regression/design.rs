@@ -4,7 +4,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, Dyn};
 
 use super::model::RidgeModel;
 use super::stats::{r2_from_sums, standardization, zero_sum_tol};
@@ -266,7 +266,8 @@ impl Block {
         (w, sse.max(0.0))
     }
 
-    /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole.
+    /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole;
+    /// `each(k, w, sse)` receives the solution of `sizes[k]` (`w` lives until the next call).
     /// The leading block of a Cholesky factor is the factor of the leading block, and nalgebra computes it by
     /// the same operations in the same order (its factorization goes column by column, each entry from the
     /// columns before it; the forward substitution and the matrix–vector product work entry by entry), so
@@ -279,28 +280,34 @@ impl Block {
         alpha: f64,
         sizes: &[usize],
         factor: Option<&Factor>,
-    ) -> Vec<(DVector<f64>, f64)> {
+        mut each: impl FnMut(usize, DVectorView<f64>, f64),
+    ) {
         let Some(ch) = factor else {
-            return sizes
-                .iter()
-                .map(|&m| self.leading(m).solve(target, alpha))
-                .collect();
+            for (k, &m) in sizes.iter().enumerate() {
+                let (w, sse) = self.leading(m).solve(target, alpha);
+                each(k, w.as_view(), sse);
+            }
+            return;
         };
         // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
         let mut forward = self.b.clone();
         ch.l_dirty()
             .solve_lower_triangular_unchecked_mut(&mut forward);
-        sizes
-            .iter()
-            .map(|&m| {
-                let l = ch.l_dirty().view((0, 0), (m, m));
-                let mut w = forward.rows(0, m).clone_owned();
-                l.ad_solve_lower_triangular_unchecked_mut(&mut w);
-                let gw = self.gv.view((0, 0), (m, m)) * &w;
-                let sse = target.rr - 2.0 * w.dot(&self.cv.rows(0, m)) + w.dot(&gw);
-                (w, sse.max(0.0))
-            })
-            .collect()
+        // One buffer for every size's solution and one for its product with the validation Gram: the
+        // product is `Gᵥ·w` as `*` computes it (`gemv`, α = 1, β = 0), without an allocation per size.
+        let mut w = DVector::zeros(forward.len());
+        let mut gw = DVector::zeros(forward.len());
+        for (k, &m) in sizes.iter().enumerate() {
+            let mut wm = w.rows_mut(0, m);
+            wm.copy_from(&forward.rows(0, m));
+            ch.l_dirty()
+                .view((0, 0), (m, m))
+                .ad_solve_lower_triangular_unchecked_mut(&mut wm);
+            let mut gwm = gw.rows_mut(0, m);
+            gwm.gemv(1.0, &self.gv.view((0, 0), (m, m)), &wm, 0.0);
+            let sse = target.rr - 2.0 * wm.dot(&self.cv.rows(0, m)) + wm.dot(&gwm);
+            each(k, w.rows(0, m), sse.max(0.0));
+        }
     }
 
     /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal; `None` where it does not
