@@ -24,6 +24,8 @@ pub(super) struct Design {
     usable: Vec<bool>,
     feature_mean: Vec<f64>,
     feature_scale: Vec<f64>,
+    /// Features constant on the training set, whose training column is zeroed.
+    constant: Vec<bool>,
     f_train: DMatrix<f64>,
     f_val: DMatrix<f64>,
     g_train: DMatrix<f64>,
@@ -67,11 +69,13 @@ impl Design {
         }
         let mut feature_mean = Vec::with_capacity(p);
         let mut feature_scale = Vec::with_capacity(p);
+        let mut constant = Vec::with_capacity(p);
         for j in 0..p {
             let (m, s) = standardization(f_train.column(j).iter().copied(), n);
             let scale = s.unwrap_or(1.0);
             feature_mean.push(m);
             feature_scale.push(scale);
+            constant.push(s.is_none());
             match s {
                 // A constant feature (z² of a two-valued input) carries nothing; exact zeros give it a
                 // zero coefficient instead of one fitted to rounding noise.
@@ -90,6 +94,7 @@ impl Design {
             usable,
             feature_mean,
             feature_scale,
+            constant,
             f_train,
             f_val,
             g_train,
@@ -125,6 +130,27 @@ impl Design {
             }
         }
         target.r.iter().zip(fitted).map(|(r, f)| r - f).collect()
+    }
+
+    /// [`RidgeModel::predict`] of `model` (fitted on this design) at every training row, then every validation
+    /// row, bit for bit: a feature column holds `(p − mean)/scale` of the same powers `predict` forms, so the
+    /// sum `intercept + Σ c·f` taken column by column in feature order is `predict`'s, row by row. `None` where
+    /// a feature of the model is constant on the training rows (its training column is zeroed).
+    pub(super) fn fitted(&self, model: &RidgeModel) -> Option<(Vec<f64>, Vec<f64>)> {
+        let idx = self.feature_indices(&model.inputs, model.degree);
+        if idx.len() != model.coef.len() || idx.iter().any(|&j| self.constant[j]) {
+            return None;
+        }
+        let sum = |f: &DMatrix<f64>| {
+            let rows = f.nrows();
+            let mut acc = vec![model.intercept; rows];
+            for (&j, &c) in idx.iter().zip(&model.coef) {
+                let column = &f.as_slice()[j * rows..(j + 1) * rows];
+                acc.iter_mut().zip(column).for_each(|(a, v)| *a += c * v);
+            }
+            acc
+        };
+        Some((sum(&self.f_train), sum(&self.f_val)))
     }
 
     /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.

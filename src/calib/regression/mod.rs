@@ -169,6 +169,16 @@ impl Candidates {
     }
 }
 
+impl Candidates {
+    /// [`RidgeModel::predict`] of `model`, fitted by the latest [`Candidates::fit`], at every training row and
+    /// every validation row, bit for bit, from the search's own feature columns; `None` where it cannot say
+    /// (no fit yet, a model of another design, a feature constant on the training rows).
+    pub fn fitted(&self, model: &RidgeModel) -> Option<(Vec<f64>, Vec<f64>)> {
+        let (_, design) = self.design.as_ref()?;
+        design.fitted(model)
+    }
+}
+
 fn check_inputs(
     x_train: &DMatrix<f64>,
     y_train: &DMatrix<f64>,
