@@ -105,6 +105,16 @@ fn zero_group(models: &mut [ComponentModel], y: &[Vector3<f64>]) {
     }
 }
 
+/// Weight below 1 (outside the training domain): `v` toward the constant part of each component's regression,
+/// its intercept (the training mean). Weight 1 leaves the bits alone.
+fn toward(models: &[ComponentModel], v: Vector3<f64>, weight: f64) -> Vector3<f64> {
+    if weight == 1.0 {
+        return v;
+    }
+    let c = Vector3::from_fn(|k, _| models[k].model.intercept);
+    c + (v - c) * weight
+}
+
 pub(super) fn mean(values: impl Iterator<Item = f64>) -> f64 {
     let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
     if n == 0 { 0.0 } else { sum / n as f64 }
@@ -164,6 +174,32 @@ impl ResidualSetup {
             regression: Candidates::new(candidate_matrix(train, dof, extra), x_val)
                 .keeping_factors(),
         })
+    }
+}
+
+impl ResidualSetup {
+    /// The position offset of `correction` (fitted on this setup) at every training point, then every
+    /// validation point: [`ResidualCorrection::correction`]'s, bit for bit, from the search's feature columns
+    /// ([`Candidates::fitted`]); `None` where those cannot say.
+    pub(super) fn positions(&self, correction: &ResidualCorrection) -> Option<Vec<Vector3<f64>>> {
+        let fitted: Vec<(Vec<f64>, Vec<f64>)> = correction
+            .position
+            .iter()
+            .map(|m| self.regression.fitted(&m.model))
+            .collect::<Option<_>>()?;
+        let [x, y, z] = fitted.as_slice() else {
+            return None;
+        };
+        let rows = |a: &[f64], b: &[f64], c: &[f64]| -> Vec<Vector3<f64>> {
+            a.iter()
+                .zip(b)
+                .zip(c)
+                .map(|((&a, &b), &c)| Vector3::new(a, b, c))
+                .collect()
+        };
+        let mut all = rows(&x.0, &y.0, &z.0);
+        all.extend(rows(&x.1, &y.1, &z.1));
+        Some(all)
     }
 }
 
@@ -385,23 +421,20 @@ impl ResidualCorrection {
         reference: &Reference,
         weight: f64,
     ) -> (Reference, Vector3<f64>) {
-        let (mut dp, mut dw) = self.correction(q, inputs);
-        // Weight below 1 (outside the training domain): toward the constant part of each component's
-        // regression, its intercept (the training mean). Weight 1 leaves the bits alone.
-        if weight != 1.0 {
-            let toward = |models: &[ComponentModel], v: Vector3<f64>| {
-                let c = Vector3::from_fn(|k, _| models[k].model.intercept);
-                c + (v - c) * weight
-            };
-            dp = toward(&self.position, dp);
-            dw = dw.map(|w| toward(&self.orientation, w));
-        }
+        let (dp, dw) = self.correction(q, inputs);
+        let dp = self.weighted_position(dp, weight);
+        let dw = dw.map(|w| toward(&self.orientation, w, weight));
         // A zero rotation leaves the reference's bits alone, as a zero offset does.
         let orientation = match dw {
             Some(w) if w != Vector3::zeros() => UnitQuaternion::from_scaled_axis(w) * reference.1,
             _ => reference.1,
         };
         ((reference.0 + dp, orientation), dp)
+    }
+
+    /// The modelled position offset `dp` at a point of weight `weight` ([`toward`]).
+    pub(super) fn weighted_position(&self, dp: Vector3<f64>, weight: f64) -> Vector3<f64> {
+        toward(&self.position, dp, weight)
     }
 
     /// Per component: kept or not, inputs, degree, α, R² on validation and on `test` (its residuals against

@@ -21,7 +21,7 @@
 //! Both model the residual with a [`ResidualCorrection`] (file `correction`), which never makes its
 //! reference worse on the validation data.
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -215,17 +215,21 @@ impl ResidualModel {
                 },
                 residual,
             };
-            // `predict_with`'s position, on the references above.
-            let error = mean(obs_val.iter().zip(refs_val).map(|(o, r)| {
-                let w = model.basis.domain.weight(&o.q, &o.inputs);
-                let ((position, _), _) = model.residual.apply_with_offset(&o.q, &o.inputs, r, w);
-                (o.position - position).norm()
-            }));
+            // The modelled offset at every training and validation point, from the search's feature
+            // columns (the same bits as `correction` there) where they can say.
+            let offsets: Vec<Vector3<f64>> =
+                setup.positions(&model.residual).unwrap_or_else(|| {
+                    q.iter()
+                        .zip(&inputs)
+                        .map(|(q, x)| model.residual.correction(q, x).0)
+                        .collect()
+                });
+            let error = validation_error(&model, &obs_val, refs_val, &offsets[train.len()..]);
             // Register again onto the nominal points plus this round's modelled residual.
             let shifted: Vec<Isometry3<f64>> = flanges
                 .iter()
-                .zip(q.iter().zip(&inputs))
-                .map(|(f, (q, x))| Translation3::from(model.residual.correction(q, x).0) * f)
+                .zip(&offsets)
+                .map(|(f, dp)| Translation3::from(*dp) * f)
                 .collect();
             match &best {
                 Some((b, _)) if error >= b * (1.0 - ROUND_GAIN) => stalled += 1,
@@ -260,6 +264,20 @@ impl ResidualModel {
     fn reference(&self, q: &[f64]) -> Reference {
         nominal_reference(&self.basis.dh, &self.basis.registration, q)
     }
+}
+
+/// `predict_with`'s mean position error on the validation points, with their references and modelled offsets
+/// given.
+fn validation_error(
+    model: &ResidualModel,
+    val: &[Observation],
+    refs: &[Reference],
+    offsets: &[Vector3<f64>],
+) -> f64 {
+    mean(val.iter().zip(refs).zip(offsets).map(|((o, r), dp)| {
+        let w = model.basis.domain.weight(&o.q, &o.inputs);
+        (o.position - (r.0 + model.residual.weighted_position(*dp, w))).norm()
+    }))
 }
 
 fn nominal_reference(dh: &DhChain, registration: &Registration, q: &[f64]) -> Reference {

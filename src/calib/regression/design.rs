@@ -4,7 +4,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, Dyn};
 
 use super::model::RidgeModel;
 use super::stats::{r2_from_sums, standardization, zero_sum_tol};
@@ -24,6 +24,8 @@ pub(super) struct Design {
     usable: Vec<bool>,
     feature_mean: Vec<f64>,
     feature_scale: Vec<f64>,
+    /// Features constant on the training set, whose training column is zeroed.
+    constant: Vec<bool>,
     f_train: DMatrix<f64>,
     f_val: DMatrix<f64>,
     g_train: DMatrix<f64>,
@@ -67,11 +69,13 @@ impl Design {
         }
         let mut feature_mean = Vec::with_capacity(p);
         let mut feature_scale = Vec::with_capacity(p);
+        let mut constant = Vec::with_capacity(p);
         for j in 0..p {
             let (m, s) = standardization(f_train.column(j).iter().copied(), n);
             let scale = s.unwrap_or(1.0);
             feature_mean.push(m);
             feature_scale.push(scale);
+            constant.push(s.is_none());
             match s {
                 // A constant feature (z² of a two-valued input) carries nothing; exact zeros give it a
                 // zero coefficient instead of one fitted to rounding noise.
@@ -90,6 +94,7 @@ impl Design {
             usable,
             feature_mean,
             feature_scale,
+            constant,
             f_train,
             f_val,
             g_train,
@@ -125,6 +130,27 @@ impl Design {
             }
         }
         target.r.iter().zip(fitted).map(|(r, f)| r - f).collect()
+    }
+
+    /// [`RidgeModel::predict`] of `model` (fitted on this design) at every training row, then every validation
+    /// row, bit for bit: a feature column holds `(p − mean)/scale` of the same powers `predict` forms, so the
+    /// sum `intercept + Σ c·f` taken column by column in feature order is `predict`'s, row by row. `None` where
+    /// a feature of the model is constant on the training rows (its training column is zeroed).
+    pub(super) fn fitted(&self, model: &RidgeModel) -> Option<(Vec<f64>, Vec<f64>)> {
+        let idx = self.feature_indices(&model.inputs, model.degree);
+        if idx.len() != model.coef.len() || idx.iter().any(|&j| self.constant[j]) {
+            return None;
+        }
+        let sum = |f: &DMatrix<f64>| {
+            let rows = f.nrows();
+            let mut acc = vec![model.intercept; rows];
+            for (&j, &c) in idx.iter().zip(&model.coef) {
+                let column = &f.as_slice()[j * rows..(j + 1) * rows];
+                acc.iter_mut().zip(column).for_each(|(a, v)| *a += c * v);
+            }
+            acc
+        };
+        Some((sum(&self.f_train), sum(&self.f_val)))
     }
 
     /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.
@@ -266,7 +292,8 @@ impl Block {
         (w, sse.max(0.0))
     }
 
-    /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole.
+    /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole;
+    /// `each(k, w, sse)` receives the solution of `sizes[k]` (`w` lives until the next call).
     /// The leading block of a Cholesky factor is the factor of the leading block, and nalgebra computes it by
     /// the same operations in the same order (its factorization goes column by column, each entry from the
     /// columns before it; the forward substitution and the matrix–vector product work entry by entry), so
@@ -279,28 +306,34 @@ impl Block {
         alpha: f64,
         sizes: &[usize],
         factor: Option<&Factor>,
-    ) -> Vec<(DVector<f64>, f64)> {
+        mut each: impl FnMut(usize, DVectorView<f64>, f64),
+    ) {
         let Some(ch) = factor else {
-            return sizes
-                .iter()
-                .map(|&m| self.leading(m).solve(target, alpha))
-                .collect();
+            for (k, &m) in sizes.iter().enumerate() {
+                let (w, sse) = self.leading(m).solve(target, alpha);
+                each(k, w.as_view(), sse);
+            }
+            return;
         };
         // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
         let mut forward = self.b.clone();
         ch.l_dirty()
             .solve_lower_triangular_unchecked_mut(&mut forward);
-        sizes
-            .iter()
-            .map(|&m| {
-                let l = ch.l_dirty().view((0, 0), (m, m));
-                let mut w = forward.rows(0, m).clone_owned();
-                l.ad_solve_lower_triangular_unchecked_mut(&mut w);
-                let gw = self.gv.view((0, 0), (m, m)) * &w;
-                let sse = target.rr - 2.0 * w.dot(&self.cv.rows(0, m)) + w.dot(&gw);
-                (w, sse.max(0.0))
-            })
-            .collect()
+        // One buffer for every size's solution and one for its product with the validation Gram: the
+        // product is `Gᵥ·w` as `*` computes it (`gemv`, α = 1, β = 0), without an allocation per size.
+        let mut w = DVector::zeros(forward.len());
+        let mut gw = DVector::zeros(forward.len());
+        for (k, &m) in sizes.iter().enumerate() {
+            let mut wm = w.rows_mut(0, m);
+            wm.copy_from(&forward.rows(0, m));
+            ch.l_dirty()
+                .view((0, 0), (m, m))
+                .ad_solve_lower_triangular_unchecked_mut(&mut wm);
+            let mut gwm = gw.rows_mut(0, m);
+            gwm.gemv(1.0, &self.gv.view((0, 0), (m, m)), &wm, 0.0);
+            let sse = target.rr - 2.0 * wm.dot(&self.cv.rows(0, m)) + wm.dot(&gwm);
+            each(k, w.rows(0, m), sse.max(0.0));
+        }
     }
 
     /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal; `None` where it does not

@@ -17,7 +17,7 @@ mod design;
 mod model;
 mod stats;
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, DVectorView};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
@@ -169,6 +169,16 @@ impl Candidates {
     }
 }
 
+impl Candidates {
+    /// [`RidgeModel::predict`] of `model`, fitted by the latest [`Candidates::fit`], at every training row and
+    /// every validation row, bit for bit, from the search's own feature columns; `None` where it cannot say
+    /// (no fit yet, a model of another design, a feature constant on the training rows).
+    pub fn fitted(&self, model: &RidgeModel) -> Option<(Vec<f64>, Vec<f64>)> {
+        let (_, design) = self.design.as_ref()?;
+        design.fitted(model)
+    }
+}
+
 fn check_inputs(
     x_train: &DMatrix<f64>,
     y_train: &DMatrix<f64>,
@@ -308,7 +318,14 @@ fn fit_structures(
         // α descending, strict improvement: equal scores keep the stronger penalty.
         let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
         for &alpha in alphas {
-            let solutions = if nested {
+            // A solution is copied out only where it beats the best so far.
+            let mut keep = |k: usize, w: DVectorView<f64>, sse: f64| {
+                let b = &mut best[k];
+                if b.as_ref().is_none_or(|b| sse < b.2) {
+                    *b = Some((alpha, w.into_owned(), sse));
+                }
+            };
+            if nested {
                 let own;
                 let factor = match factors.as_deref_mut() {
                     Some(f) => f.get(&blocks[0], largest, alpha),
@@ -317,13 +334,11 @@ fn fit_structures(
                         own.as_ref()
                     }
                 };
-                blocks[0].solve_leading(target, alpha, &sizes, factor)
+                blocks[0].solve_leading(target, alpha, &sizes, factor, keep);
             } else {
-                blocks.iter().map(|b| b.solve(target, alpha)).collect()
-            };
-            for (b, (w, sse)) in best.iter_mut().zip(solutions) {
-                if b.as_ref().is_none_or(|b| sse < b.2) {
-                    *b = Some((alpha, w, sse));
+                for (k, b) in blocks.iter().enumerate() {
+                    let (w, sse) = b.solve(target, alpha);
+                    keep(k, w.as_view(), sse);
                 }
             }
         }
@@ -611,8 +626,14 @@ mod tests {
             let block = Block::new(&design, &target, &idx);
             let sizes: Vec<usize> = (1..=order.len()).map(|k| k * degree).collect();
             for alpha in [0.0, 1e-8, 1e-2, 30.0] {
-                let leading =
-                    block.solve_leading(&target, alpha, &sizes, block.factor(alpha).as_ref());
+                let mut leading = Vec::new();
+                block.solve_leading(
+                    &target,
+                    alpha,
+                    &sizes,
+                    block.factor(alpha).as_ref(),
+                    |_, w, sse| leading.push((w.into_owned(), sse)),
+                );
                 for (k, (w, sse)) in leading.iter().enumerate() {
                     let alone = Block::new(&design, &target, &idx[..sizes[k]]);
                     let (w1, sse1) = alone.solve(&target, alpha);

@@ -35,25 +35,30 @@ impl RidgeModel {
     ///
     /// Panics if `candidates` is shorter than the largest index in `inputs`.
     pub fn predict(&self, candidates: &[f64]) -> f64 {
+        // Each feature's coefficient, mean and scale from one zipped iterator, in feature order: no index
+        // checks in the loop, the same terms summed in the same order. (A fitted or validated model has one
+        // of each per feature.)
+        let mut features = self
+            .coef
+            .iter()
+            .zip(&self.feature_mean)
+            .zip(&self.feature_scale);
         let z = |i: usize| (candidates[self.inputs[i]] - self.input_mean[i]) / self.input_scale[i];
         let mut acc = self.intercept;
-        let mut j = 0;
-        let mut add = |raw: f64, j: &mut usize| {
-            acc += self.coef[*j] * ((raw - self.feature_mean[*j]) / self.feature_scale[*j]);
-            *j += 1;
-        };
         for i in 0..self.inputs.len() {
             let zi = z(i);
             let mut p = zi;
-            for _ in 0..self.degree {
-                add(p, &mut j);
+            for ((c, m), s) in features.by_ref().take(self.degree) {
+                acc += c * ((p - m) / s);
                 p *= zi;
             }
         }
         if self.cross_terms {
             for a in 0..self.inputs.len() {
                 for b in a + 1..self.inputs.len() {
-                    add(z(a) * z(b), &mut j);
+                    if let Some(((c, m), s)) = features.next() {
+                        acc += c * ((z(a) * z(b) - m) / s);
+                    }
                 }
             }
         }
