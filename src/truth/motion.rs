@@ -337,6 +337,18 @@ fn command(path: &dyn Fn(f64) -> PathPoint, n: usize, t: f64) -> Result<PathPoin
     Ok(p)
 }
 
+/// The links' temperature at time `t` (s), the unloaded angles at the command `p` and the link lengths: where
+/// a quasi-static solve starts from.
+fn unload(robot: &TrueRobot, t: f64, p: &PathPoint, visit: &mut Visit, state: &mut TrueState) {
+    visit.temperature = robot
+        .perturbation
+        .thermal
+        .as_ref()
+        .map(|th| th.temperature_at(t));
+    robot.unloaded_angles_after(&p.q, visit, &mut state.q0);
+    state.scale = robot.length_scale(visit);
+}
+
 /// A joint at rest keeps the direction it last moved in.
 fn turn(visit: &mut Visit, qd: &[f64]) {
     for (d, v) in visit.direction.iter_mut().zip(qd) {
@@ -397,14 +409,8 @@ impl Walk<'_> {
         self.solve_through(here)?;
         let smooth = self.interpolate(t, here, &p.qdd);
         if exact || !smooth {
-            self.visit.temperature = robot
-                .perturbation
-                .thermal
-                .as_ref()
-                .map(|th| th.temperature_at(t));
             let state = &mut self.state;
-            robot.unloaded_angles_after(&p.q, &self.visit, &mut state.q0);
-            state.scale = robot.length_scale(&self.visit);
+            unload(robot, t, &p, &mut self.visit, state);
             // From the grid's cubic: a fraction of the iterations.
             for ((q, q0), d) in state.q.iter_mut().zip(&state.q0).zip(&self.quasi_static) {
                 *q = q0 - d;
@@ -465,14 +471,8 @@ impl Walk<'_> {
         let p = command(self.path, n, t)?;
         let grid = &mut self.grid;
         turn(&mut grid.visit, &p.qd);
-        grid.visit.temperature = robot
-            .perturbation
-            .thermal
-            .as_ref()
-            .map(|th| th.temperature_at(t));
         let state = &mut grid.state;
-        robot.unloaded_angles_after(&p.q, &grid.visit, &mut state.q0);
-        state.scale = robot.length_scale(&grid.visit);
+        unload(robot, t, &p, &mut grid.visit, state);
         let motion = Some((&p.qd[..], &p.qdd[..]));
         let mut behind = grid.knots.iter().rev();
         match (behind.next(), behind.next()) {
