@@ -47,15 +47,8 @@ struct Whitened<'a> {
     problem: &'a Problem<'a>,
     x0: &'a DVector<f64>,
     s: &'a DMatrix<f64>,
-    z: DVector<f64>,
-    /// The residual rows at `z`.
-    r: DVector<f64>,
-    /// The Jacobian at `z` (unwhitened, then whitened): buffers reused from point to point.
-    j: DMatrix<f64>,
-    jz: DMatrix<f64>,
-    /// The small problem at `z`, `None` where the residuals or the Jacobian are not finite. Every point the
-    /// crate tries gets its Jacobian, since the small residuals are expressed through it.
-    small: Option<Reduced>,
+    /// The evaluation at the current point.
+    at: Evaluation,
     /// Whether the crate took the Jacobian at `z`: it does so only at the points it accepts.
     accepted: Cell<bool>,
     /// The last accepted point and its evaluation, set aside while the crate tries steps from it: when
@@ -66,25 +59,42 @@ struct Whitened<'a> {
     spare: Option<Evaluation>,
 }
 
-/// One point's evaluation: `z`, the residuals, the Jacobian unwhitened and whitened, the small problem.
-type Evaluation = (
-    DVector<f64>,
-    DVector<f64>,
-    DMatrix<f64>,
-    DMatrix<f64>,
-    Option<Reduced>,
-);
+/// One point's evaluation; its buffers are reused from point to point.
+struct Evaluation {
+    z: DVector<f64>,
+    /// The residual rows at `z`.
+    r: DVector<f64>,
+    /// The Jacobian at `z`, unwhitened and whitened.
+    j: DMatrix<f64>,
+    jz: DMatrix<f64>,
+    /// The small problem at `z`, `None` where the residuals or the Jacobian are not finite. Every point the
+    /// crate tries gets its Jacobian, since the small residuals are expressed through it.
+    small: Option<Reduced>,
+}
+
+impl Evaluation {
+    /// At `z = 0` of k parameters, its buffers empty (the first evaluation sizes them).
+    fn empty(k: usize) -> Evaluation {
+        Evaluation {
+            z: DVector::zeros(k),
+            r: DVector::zeros(0),
+            j: DMatrix::zeros(0, 0),
+            jz: DMatrix::zeros(0, 0),
+            small: None,
+        }
+    }
+}
 
 impl Whitened<'_> {
     fn x(&self) -> DVector<f64> {
-        self.x0 + self.s * &self.z
+        self.x0 + self.s * &self.at.z
     }
 
     /// The start `z = 0` (`x = x0`), whose residuals `r0` and Jacobian `j0` the caller has evaluated.
     fn start(&mut self, r0: DVector<f64>, j0: DMatrix<f64>) {
-        self.z.fill(0.0);
-        self.r = r0;
-        self.j = j0;
+        self.at.z.fill(0.0);
+        self.at.r = r0;
+        self.at.j = j0;
         self.whiten_and_reduce();
         self.accepted.set(false);
         self.anchor = None;
@@ -93,37 +103,22 @@ impl Whitened<'_> {
     /// The evaluation at `z` out of the problem, leaving the spare buffers (or empty ones, resized by the
     /// next evaluation) in its place.
     fn take(&mut self) -> Evaluation {
-        let k = self.z.len();
-        let spare = self.spare.take().unwrap_or_else(|| {
-            (
-                DVector::zeros(k),
-                DVector::zeros(0),
-                DMatrix::zeros(0, 0),
-                DMatrix::zeros(0, 0),
-                None,
-            )
-        });
+        let k = self.at.z.len();
+        let spare = self.spare.take().unwrap_or_else(|| Evaluation::empty(k));
         self.put(spare)
     }
 
     /// `evaluation` into the problem; the one it replaces is returned.
     fn put(&mut self, evaluation: Evaluation) -> Evaluation {
-        let (z, r, j, jz, small) = evaluation;
-        (
-            std::mem::replace(&mut self.z, z),
-            std::mem::replace(&mut self.r, r),
-            std::mem::replace(&mut self.j, j),
-            std::mem::replace(&mut self.jz, jz),
-            std::mem::replace(&mut self.small, small),
-        )
+        std::mem::replace(&mut self.at, evaluation)
     }
 
     fn whiten_and_reduce(&mut self) {
-        if self.jz.shape() != self.j.shape() {
-            self.jz = DMatrix::zeros(self.j.nrows(), self.j.ncols());
+        if self.at.jz.shape() != self.at.j.shape() {
+            self.at.jz = DMatrix::zeros(self.at.j.nrows(), self.at.j.ncols());
         }
-        self.jz.gemm(1.0, &self.j, self.s, 0.0);
-        self.small = reduce(&self.jz, &self.r);
+        self.at.jz.gemm(1.0, &self.at.j, self.s, 0.0);
+        self.at.small = reduce(&self.at.jz, &self.at.r);
     }
 }
 
@@ -138,7 +133,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
                 .zip(z.iter())
                 .all(|(a, b)| a.to_bits() == b.to_bits())
         };
-        if self.anchor.as_ref().is_some_and(|a| same(&a.0)) {
+        if self.anchor.as_ref().is_some_and(|a| same(&a.z)) {
             let anchor = self.anchor.take().expect("checked");
             self.spare = Some(self.put(anchor));
             self.accepted.set(true);
@@ -149,24 +144,24 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Whitened<'_> {
             self.spare = self.anchor.take().or(self.spare.take());
             self.anchor = Some(self.take());
         }
-        self.z.copy_from(z);
+        self.at.z.copy_from(z);
         let x = self.x();
         self.problem
-            .evaluate_into(x.as_slice(), &mut self.r, Some(&mut self.j));
+            .evaluate_into(x.as_slice(), &mut self.at.r, Some(&mut self.at.j));
         self.whiten_and_reduce();
     }
 
     fn params(&self) -> DVector<f64> {
-        self.z.clone()
+        self.at.z.clone()
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        self.small.as_ref().map(|s| s.residuals.clone())
+        self.at.small.as_ref().map(|s| s.residuals.clone())
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         self.accepted.set(true);
-        self.small.as_ref().map(|s| s.jacobian.clone())
+        self.at.small.as_ref().map(|s| s.jacobian.clone())
     }
 }
 
@@ -185,11 +180,7 @@ pub(super) fn minimize(
         problem,
         x0,
         s,
-        z: DVector::zeros(k),
-        r: DVector::zeros(0),
-        j: DMatrix::zeros(0, 0),
-        jz: DMatrix::zeros(0, 0),
-        small: None,
+        at: Evaluation::empty(k),
         accepted: Cell::new(false),
         anchor: None,
         spare: None,
@@ -199,11 +190,12 @@ pub(super) fn minimize(
     // in its small parameters, so Levenberg–Marquardt then only polishes; if the step does not help, it
     // starts from the nominal model instead.
     problem.start(r0, j0);
-    let start_norm = problem.r.norm();
+    let start_norm = problem.at.r.norm();
     let gauss_newton = problem
+        .at
         .small
         .is_some()
-        .then(|| -(problem.jz.tr_mul(&problem.r)));
+        .then(|| -(problem.at.jz.tr_mul(&problem.at.r)));
     // The start's evaluation counts once, here (the rank check's).
     let mut evaluations_before = 1;
     if let Some(z0) = gauss_newton {
@@ -212,7 +204,7 @@ pub(super) fn minimize(
         problem.set_params(&z0);
         evaluations_before += 1;
         // A NaN norm counts as no improvement.
-        if problem.r.norm().partial_cmp(&start_norm) != Some(std::cmp::Ordering::Less) {
+        if problem.at.r.norm().partial_cmp(&start_norm) != Some(std::cmp::Ordering::Less) {
             problem.spare = Some(problem.put(start));
         } else {
             problem.spare = Some(start);
@@ -248,15 +240,15 @@ pub(super) fn minimize(
     }
     // The crate's last evaluation is at its answer (it goes back to it after a rejected step), so the
     // residuals and the small problem there are the solution's.
-    let std = problem.small.as_ref().and_then(|small| {
-        standard_deviations(&small.jacobian.rows(0, k).into_owned(), s, &problem.r)
+    let std = problem.at.small.as_ref().and_then(|small| {
+        standard_deviations(&small.jacobian.rows(0, k).into_owned(), s, &problem.at.r)
     });
     Ok(Minimum {
         x: problem.x(),
         evaluations,
         termination,
         std,
-        residual: problem.r,
+        residual: problem.at.r,
     })
 }
 
