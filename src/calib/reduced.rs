@@ -46,16 +46,43 @@ pub fn reduce(j: &DMatrix<f64>, r: &DVector<f64>) -> Option<Reduced> {
         });
     }
     let (upper, a) = normal_equations(j, r).unwrap_or_else(|| householder(j, r));
-    let rest2 = (r.norm_squared() - a.norm_squared()).max(0.0);
+    Some(assemble(upper, a, r.norm_squared()))
+}
+
+/// The small problem from `JᵀJ`, `Jᵀr` and `‖r‖²` alone (of a tall problem: more than n + 1 rows), through
+/// the normal equations; `None` where any is not finite or the column-scaled Gram is not well conditioned
+/// (a Cholesky pivot below [`MIN_PIVOT`]): the caller then reduces `J` itself ([`reduce`]).
+pub fn reduce_gram(gram: &DMatrix<f64>, jtr: &DVector<f64>, rr: f64) -> Option<Reduced> {
+    if !(rr.is_finite() && all_finite(gram.as_slice()) && all_finite(jtr.as_slice())) {
+        return None;
+    }
+    let (upper, a) = from_gram(gram, jtr)?;
+    Some(assemble(upper, a, rr))
+}
+
+/// `JᵀJ` of `j` (m × n) by one matrix product.
+pub fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
+    let (m, n) = j.shape();
+    // Jᵀ as a view (strides swapped): the product goes through matrixmultiply's kernels.
+    let jt = DMatrixView::from_slice_with_strides(j.as_slice(), n, m, m, 1);
+    let mut gram = DMatrix::zeros(n, n);
+    gram.gemm(1.0, &jt, j, 0.0);
+    gram
+}
+
+/// `[R; 0]` and `[a; ρ]` with `ρ² = ‖r‖² − ‖a‖²` (`rr` = `‖r‖²`).
+fn assemble(upper: DMatrix<f64>, a: DVector<f64>, rr: f64) -> Reduced {
+    let n = a.len();
+    let rest2 = (rr - a.norm_squared()).max(0.0);
     let mut residuals = DVector::zeros(n + 1);
     residuals.rows_mut(0, n).copy_from(&a);
     residuals[n] = rest2.sqrt();
     let mut jacobian = DMatrix::zeros(n + 1, n);
     jacobian.view_mut((0, 0), (n, n)).copy_from(&upper);
-    Some(Reduced {
+    Reduced {
         residuals,
         jacobian,
-    })
+    }
 }
 
 /// A tall least-squares problem that writes its residuals and Jacobian into buffers kept by the caller, so
@@ -146,12 +173,12 @@ fn all_finite(values: &[f64]) -> bool {
 
 /// `R` and `a` from the Cholesky factor of the column-scaled `JᵀJ`; `None` where it is not well conditioned.
 fn normal_equations(j: &DMatrix<f64>, r: &DVector<f64>) -> Option<(DMatrix<f64>, DVector<f64>)> {
-    let (m, n) = j.shape();
-    // Jᵀ as a view (strides swapped): the product goes through matrixmultiply's kernels.
-    let jt = DMatrixView::from_slice_with_strides(j.as_slice(), n, m, m, 1);
-    let mut gram = DMatrix::zeros(n, n);
-    gram.gemm(1.0, &jt, j, 0.0);
-    let jtr = j.tr_mul(r);
+    from_gram(&gram(j), &j.tr_mul(r))
+}
+
+/// [`normal_equations`] from `JᵀJ` and `Jᵀr`.
+fn from_gram(gram: &DMatrix<f64>, jtr: &DVector<f64>) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    let n = gram.ncols();
     let d: Vec<f64> = (0..n)
         .map(|c| gram[(c, c)].sqrt())
         .map(|v| if v > 0.0 { v } else { 1.0 })
@@ -195,6 +222,24 @@ mod tests {
         });
         let r = DVector::from_fn(m, |_, _| rng.random_range(-1.0..1.0));
         (j, r)
+    }
+
+    /// The small problem from `JᵀJ`, `Jᵀr` and `‖r‖²` is the one from `J` and `r` bit for bit (the same
+    /// normal equations); where the Gram matrix is not well conditioned or not finite it is left to the
+    /// caller.
+    #[test]
+    fn small_problem_from_the_gram_matrix() {
+        let (j, r) = random(300, 11, 4);
+        let full = gram(&j);
+        let tall = reduce(&j, &r).unwrap();
+        let small = reduce_gram(&full, &j.tr_mul(&r), r.norm_squared()).unwrap();
+        assert_eq!(tall.residuals, small.residuals);
+        assert_eq!(tall.jacobian, small.jacobian);
+        let mut bad = j.clone();
+        let first = bad.column(0).into_owned();
+        bad.set_column(10, &first);
+        assert!(reduce_gram(&gram(&bad), &bad.tr_mul(&r), r.norm_squared()).is_none());
+        assert!(reduce_gram(&full, &j.tr_mul(&r), f64::NAN).is_none());
     }
 
     /// The four quantities Levenberg–Marquardt reads agree with the tall problem's, through the normal

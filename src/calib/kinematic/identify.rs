@@ -115,6 +115,8 @@ pub(super) struct Identifiability {
     pub(super) whitening: Option<DMatrix<f64>>,
 }
 
+/// `j` is the Jacobian or any matrix with its Gram matrix `JᵀJ` (such as its QR triangle's columns): all
+/// that is read are the column norms and the singular values, which the Gram matrix fixes.
 pub(super) fn identifiability(j: &DMatrix<f64>, params: &[Param]) -> Identifiability {
     let mut scaled = j.clone();
     let mut norms = Vec::with_capacity(j.ncols());
@@ -363,7 +365,7 @@ pub(super) fn synthetic_point(
     let tau = gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q));
     Point::new(
         problem.dh,
-        q,
+        &q,
         flange * problem.base.mount,
         problem.length.map(|_| flange.rotation),
         tau,
@@ -477,7 +479,7 @@ mod tests {
                     let tau = gravity.torques(&dh, &q);
                     Point::new(
                         &dh,
-                        q,
+                        &q,
                         f * problem.base.mount,
                         length.map(|_| f.rotation),
                         tau,

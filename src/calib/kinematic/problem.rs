@@ -1,44 +1,41 @@
 //! The least-squares problem shared by the structural analysis, the rank check and Levenberg–Marquardt: the
 //! residuals of the measured points and their analytic Jacobian at the current estimate.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3,
+};
 
 use super::params::{Param, State};
 use crate::calib::error_model::{ErrorFrames, error_transforms, so3_left_jacobian};
-use crate::robot::dh::{DhChain, FixedRotations};
+use crate::robot::dh::DhChain;
 
 /// What the model knows about each fitted point.
 pub(super) struct Point {
-    pub(super) q: Vec<f64>,
     /// The measured point, base frame of the initial registration.
     pub(super) y: Point3<f64>,
     /// The measured flange orientation, same frame (nests).
     pub(super) orientation: Option<UnitQuaternion<f64>>,
     /// Gravity torques at the commanded angles (elastic only; empty otherwise).
     pub(super) tau: Vec<f64>,
-    /// The link transforms `A_i(q_i)` where the angles do not move with the parameters (no compliance:
-    /// `tau` empty), computed once for every evaluation; empty otherwise.
+    /// The link transforms `A_i(q_i)` at the commanded angles, computed once for every evaluation (a
+    /// compliance's deflection turns them by [`deflected`]).
     links: Vec<Isometry3<f64>>,
 }
 
 impl Point {
     pub(super) fn new(
         dh: &DhChain,
-        q: Vec<f64>,
+        q: &[f64],
         y: Point3<f64>,
         orientation: Option<UnitQuaternion<f64>>,
         tau: Vec<f64>,
     ) -> Point {
-        let links = if tau.is_empty() {
-            q.iter()
-                .enumerate()
-                .map(|(i, &qi)| dh.link_transform(i, qi))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let links = q
+            .iter()
+            .enumerate()
+            .map(|(i, &qi)| dh.link_transform(i, qi))
+            .collect();
         Point {
-            q,
             y,
             orientation,
             tau,
@@ -46,56 +43,70 @@ impl Point {
         }
     }
 
-    /// The chain's frames with errors at this point into `frames`: from its link transforms where they are
-    /// fixed, else at its angles deflected by `compliance` (into `qd`), with the error transforms
+    /// The chain's frames with errors at this point into `frames`: its link transforms, each deflected by
+    /// its compliance times its gravity torque where those are fitted, with the error transforms
     /// `transforms` ([`error_transforms`]).
     pub(super) fn frames_into(
         &self,
         dh: &DhChain,
         compliance: &[f64],
-        fixed: &FixedRotations,
         transforms: &[Option<Isometry3<f64>>],
         frames: &mut ErrorFrames,
-        qd: &mut Vec<f64>,
     ) {
-        if self.links.is_empty() {
-            qd.clear();
-            qd.extend(
-                self.q
-                    .iter()
-                    .zip(&self.tau)
-                    .zip(compliance)
-                    .map(|((q, t), c)| q + c * t),
-            );
-            let links = qd
-                .iter()
-                .enumerate()
-                .map(|(i, &qi)| dh.link_transform_fixed(i, qi, fixed));
-            frames.rebuild(dh, links, transforms);
-        } else {
+        if self.tau.is_empty() {
             frames.rebuild(dh, self.links.iter().copied(), transforms);
+        } else {
+            let links = self
+                .links
+                .iter()
+                .zip(&self.tau)
+                .zip(compliance)
+                .zip(&dh.rows)
+                .map(|(((a, t), c), row)| deflected(a, c * t, row.prismatic));
+            frames.rebuild(dh, links, transforms);
         }
     }
+}
+
+/// `A_i(q_i + δ)` from `A_i(q_i)`: a DH row is `Rz(θ)·Tz(d)·Tx(a)·Rx(α)` (then a Hayati row's `Ry(β)`), and
+/// a joint moves its first factors — a revolute one `Rz(θ)`, with `Rz(θ + δ) = Rz(δ)·Rz(θ)`, a prismatic
+/// one `Tz(d)`, which commutes with `Rz(θ)` — so the deflection multiplies the link on the left. The
+/// elastic fit's angles then take no sine or cosine per point and evaluation: the same transform as
+/// [`DhChain::link_transform`] at `q_i + δ`, to rounding.
+fn deflected(link: &Isometry3<f64>, delta: f64, prismatic: bool) -> Isometry3<f64> {
+    if prismatic {
+        return Translation3::new(0.0, 0.0, delta) * link;
+    }
+    let (s, c) = half_sin_cos(delta);
+    Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::new_unchecked(Quaternion::new(c, 0.0, 0.0, s)),
+    ) * link
+}
+
+/// `sin(δ/2)` and `cos(δ/2)`; by their Taylor series where `|δ/2| < 0.01` (a deflection is a few
+/// milliradians), whose next terms (`x⁹/9!`, `x¹⁰/10!`) are below 1e-21 of the sum: the library's values
+/// to rounding, without its argument reduction.
+fn half_sin_cos(delta: f64) -> (f64, f64) {
+    let x = 0.5 * delta;
+    if x.abs() >= 0.01 {
+        return x.sin_cos();
+    }
+    let x2 = x * x;
+    let sin = x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0)));
+    let cos = 1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0)));
+    (sin, cos)
 }
 
 /// RMS of the 3-D position residual of `state` over `points` (m).
 pub(super) fn rms(dh: &DhChain, state: &State, points: &[Point]) -> f64 {
     let transforms = error_transforms(&state.errors);
-    let fixed = dh.fixed_rotations();
     let rot = UnitQuaternion::from_scaled_axis(state.rho);
     let mut frames = empty_frames(dh);
-    let mut qd = Vec::with_capacity(dh.dof());
     let sum: f64 = points
         .iter()
         .map(|pt| {
-            pt.frames_into(
-                dh,
-                &state.compliance,
-                &fixed,
-                &transforms,
-                &mut frames,
-                &mut qd,
-            );
+            pt.frames_into(dh, &state.compliance, &transforms, &mut frames);
             let p = frames.flange * state.mount;
             let v = rot * pt.y.coords + state.t;
             (p.coords - v).norm_squared()
@@ -161,20 +172,11 @@ impl Problem<'_> {
         let transforms = error_transforms(&s.errors);
         let mut axes: Vec<Axes> = vec![Axes::default(); s.errors.len()];
         let mut frames = empty_frames(self.dh);
-        let fixed = self.dh.fixed_rotations();
         let fitted = self.fitted_frames(s.errors.len());
         let columns: Vec<Column> = self.params.iter().map(|&p| Column::of(p)).collect();
-        let mut qd = Vec::with_capacity(s.errors.len());
         let mut row = 0;
         for pt in &self.points {
-            pt.frames_into(
-                self.dh,
-                &s.compliance,
-                &fixed,
-                &transforms,
-                &mut frames,
-                &mut qd,
-            );
+            pt.frames_into(self.dh, &s.compliance, &transforms, &mut frames);
             let p = frames.flange * s.mount;
             let v = rot * pt.y.coords;
             r.fixed_rows_mut::<3>(row).copy_from(&(p.coords - v - s.t));
@@ -379,6 +381,25 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// A link deflected on the left is the link at the deflected angle, revolute and prismatic, through the
+    /// series (small deflections) and through the library's sine (large ones).
+    #[test]
+    fn deflected_link_is_the_link_at_the_deflected_angle() {
+        let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
+        let mut dh = DhChain::from_chain(&chain).unwrap();
+        dh.rows[2].a = 0.05;
+        dh.rows[4].beta = 0.01;
+        dh.rows[5].prismatic = true;
+        for i in [0, 2, 4, 5] {
+            for (q, delta) in [(0.3, 1e-9), (-1.2, 3e-4), (2.0, -0.0199), (0.7, 0.5)] {
+                let want = dh.link_transform(i, q + delta);
+                let got = deflected(&dh.link_transform(i, q), delta, dh.rows[i].prismatic);
+                let off = (got.to_homogeneous() - want.to_homogeneous()).abs().max();
+                assert!(off < 1e-15, "row {i}, q {q}, δ {delta}: off by {off:e}");
+            }
+        }
+    }
+
     /// The analytic Jacobian of every candidate, at a state far from zero (so the e = 0 formulas would be
     /// wrong), against central differences of the residuals; position and nest orientation rows, compliances.
     #[test]
@@ -395,14 +416,15 @@ mod tests {
                     .map(|j| rng.random_range(j.lower..j.upper))
                     .collect();
                 let f = dh.flange_pose(&q);
-                Point {
-                    y: f * Point3::new(0.01, 0.02, 0.05),
-                    orientation: (i % 2 == 0)
+                let tau = gravity.torques(&dh, &q);
+                Point::new(
+                    &dh,
+                    &q,
+                    f * Point3::new(0.01, 0.02, 0.05),
+                    (i % 2 == 0)
                         .then(|| UnitQuaternion::from_euler_angles(0.01, 0.02, 0.03) * f.rotation),
-                    tau: gravity.torques(&dh, &q),
-                    q,
-                    links: Vec::new(),
-                }
+                    tau,
+                )
             })
             .collect();
         let params = candidates(7, true);

@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use serde::{Deserialize, Serialize};
 
 use super::problem::Problem;
-use crate::calib::reduced::{Reduced, reduce};
+use crate::calib::reduced::{Reduced, gram, reduce, reduce_gram};
 
 /// How the minimization ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -42,7 +42,9 @@ pub(super) struct Minimum {
 /// the long, gently curved valleys of a weakly excited campaign instead of zig-zagging across them, which
 /// keeps the iterations to a handful. The crate sees the equivalent small problem ([`reduced`]): the
 /// whitened Jacobian's columns are near orthonormal, so its Gram matrix is as well conditioned as a
-/// problem gets.
+/// problem gets. That Gram matrix and gradient are `Sᵀ(JᵀJ)S` and `Sᵀ(Jᵀr)`: `J·S` itself (m × k times
+/// k × k) is never formed, except where they do not make a well-conditioned small problem.
+/// `S = D⁻¹R₀⁻¹` (`J₀D⁻¹ = Q₀R₀`, `D` the column norms of `J₀`): upper triangular.
 struct Whitened<'a> {
     problem: &'a Problem<'a>,
     x0: &'a DVector<f64>,
@@ -64,9 +66,10 @@ struct Evaluation {
     z: DVector<f64>,
     /// The residual rows at `z`.
     r: DVector<f64>,
-    /// The Jacobian at `z`, unwhitened and whitened.
+    /// The Jacobian at `z` (unwhitened).
     j: DMatrix<f64>,
-    jz: DMatrix<f64>,
+    /// The whitened gradient `(J·S)ᵀr` at `z`.
+    gz: DVector<f64>,
     /// The small problem at `z`, `None` where the residuals or the Jacobian are not finite. Every point the
     /// crate tries gets its Jacobian, since the small residuals are expressed through it.
     small: Option<Reduced>,
@@ -79,7 +82,7 @@ impl Evaluation {
             z: DVector::zeros(k),
             r: DVector::zeros(0),
             j: DMatrix::zeros(0, 0),
-            jz: DMatrix::zeros(0, 0),
+            gz: DVector::zeros(0),
             small: None,
         }
     }
@@ -113,12 +116,28 @@ impl Whitened<'_> {
         std::mem::replace(&mut self.at, evaluation)
     }
 
+    /// The small problem at `z` from `Sᵀ(JᵀJ)S` and `Sᵀ(Jᵀr)`: one m × k × k product (`JᵀJ`) instead of
+    /// two (`J·S`, then its Gram matrix). Forming `JᵀJ` of the unwhitened `J` squares its condition
+    /// number (that of the column-scaled `J` about 1e4 on a campaign), so the whitened Gram matrix carries
+    /// rounding errors of about 1e-8 relative instead of 1e-12 — enough for Levenberg–Marquardt's steps and
+    /// trust region; the gradient, which fixes where the fit stops, is `Sᵀ(Jᵀr)` either way within a few
+    /// units of `ε·cond`. Where the small problem is not well conditioned or not finite, `J·S` is formed
+    /// and reduced by [`reduce`] (a QR where needed) as before.
     fn whiten_and_reduce(&mut self) {
-        if self.at.jz.shape() != self.at.j.shape() {
-            self.at.jz = DMatrix::zeros(self.at.j.nrows(), self.at.j.ncols());
+        let e = &mut self.at;
+        let (m, k) = e.j.shape();
+        if m > k + 1 {
+            let g = gram(&e.j);
+            let gram_z = self.s.tr_mul(&(&g * self.s));
+            e.gz = self.s.tr_mul(&e.j.tr_mul(&e.r));
+            e.small = reduce_gram(&gram_z, &e.gz, e.r.norm_squared());
+            if e.small.is_some() {
+                return;
+            }
         }
-        self.at.jz.gemm(1.0, &self.at.j, self.s, 0.0);
-        self.at.small = reduce(&self.at.jz, &self.at.r);
+        let jz = &e.j * self.s;
+        e.gz = jz.tr_mul(&e.r);
+        e.small = reduce(&jz, &e.r);
     }
 }
 
@@ -191,11 +210,7 @@ pub(super) fn minimize(
     // starts from the nominal model instead.
     problem.start(r0, j0);
     let start_norm = problem.at.r.norm();
-    let gauss_newton = problem
-        .at
-        .small
-        .is_some()
-        .then(|| -(problem.at.jz.tr_mul(&problem.at.r)));
+    let gauss_newton = problem.at.small.is_some().then(|| -&problem.at.gz);
     // The start's evaluation counts once, here (the rank check's).
     let mut evaluations_before = 1;
     if let Some(z0) = gauss_newton {
