@@ -5,6 +5,7 @@
 //! work runs in parallel and the result is the same whatever the thread count.
 
 use std::collections::BTreeMap;
+use std::ops::Range;
 
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
@@ -90,8 +91,24 @@ impl Generator<'_> {
                 region.size_m,
                 &mut derive(self.seed, Stream::Layout, &[r, attempt]),
             );
-            let (accepted, counts) =
-                self.candidates(r, attempt, region, &anchor, &unit, collision)?;
+            let goal = if selects { candidates } else { want };
+            let last_try = attempt + 1 == MAX_ATTEMPTS || unit.len() >= MAX_CANDIDATE_FACTOR * want;
+            let tried = Tried {
+                r,
+                attempt,
+                region,
+                anchor: &anchor,
+                unit: &unit,
+                collision,
+            };
+            let (accepted, counts) = match self.attempt(&tried, want, goal, last_try)? {
+                Attempt::Done(accepted, counts) => (accepted, counts),
+                Attempt::Failed(next, counts) => {
+                    last = counts;
+                    candidates = next;
+                    continue;
+                }
+            };
             last = counts;
             if accepted.len() >= want && selects {
                 if selectors.is_empty() {
@@ -117,13 +134,10 @@ impl Generator<'_> {
                 last.used = kept.len();
                 return Ok(vec![Ok((kept, last))]);
             }
-            let rate = accepted.len() as f64 / unit.len().max(1) as f64;
             if accepted.is_empty() && unit.len() >= 4 * want {
                 break;
             }
-            let goal = if selects { candidates } else { want };
-            let next = (goal as f64 / rate.max(0.02) * 1.25).ceil() as usize;
-            candidates = next.max(2 * unit.len()).min(MAX_CANDIDATE_FACTOR * want);
+            candidates = next_count(goal, accepted.len(), unit.len(), want);
             if unit.len() >= MAX_CANDIDATE_FACTOR * want {
                 break;
             }
@@ -163,17 +177,37 @@ impl Generator<'_> {
             .collect())
     }
 
-    /// The feasible candidates of one attempt, as the visits that would measure them, in layout order.
-    fn candidates(
-        &self,
-        r: u64,
-        attempt: u64,
-        region: &RegionConfig,
-        anchor: &[f64],
-        unit: &[[f64; 3]],
-        collision: &CollisionModel,
-    ) -> Result<(Vec<Stop>, Rejections)> {
-        let planned = self.plan_all(r, attempt, region, anchor, unit, collision);
+    /// One attempt's candidates. When the attempt cannot succeed — it has no more candidates than points wanted —
+    /// its first three quarters are judged first; if some were turned down (so it fails) and enough were
+    /// feasible that the next attempt's size is fixed whatever the rest would give ([`next_count`] falls with
+    /// the feasible share), the rest is never planned: `Failed` with that size and the partial counts, which
+    /// nothing reads, since a later attempt follows (`last_try` false). Otherwise the whole attempt, as one pass.
+    fn attempt(&self, t: &Tried, want: usize, goal: usize, last_try: bool) -> Result<Attempt> {
+        let n = t.unit.len();
+        let split = if !last_try && n <= want {
+            (3 * n).div_ceil(4)
+        } else {
+            n
+        };
+        let (mut accepted, mut counts) = self.candidates(t, 0..split)?;
+        if split < n {
+            if let Some(next) = decided(goal, want, n, accepted.len(), split - accepted.len()) {
+                return Ok(Attempt::Failed(next, counts));
+            }
+            let (rest, rest_counts) = self.candidates(t, split..n)?;
+            accepted.extend(rest);
+            counts.add(&rest_counts);
+        }
+        Ok(Attempt::Done(accepted, counts))
+    }
+
+    /// The feasible candidates among layout points `range` of one attempt, as the visits that would measure them,
+    /// in layout order; the counts are of those points.
+    fn candidates(&self, t: &Tried, range: Range<usize>) -> Result<(Vec<Stop>, Rejections)> {
+        let (r, attempt, region, collision) = (t.r, t.attempt, t.region, t.collision);
+        let first = range.start;
+        let unit = &t.unit[range];
+        let planned = self.plan_all(r, attempt, region, t.anchor, unit, first, collision);
 
         let deflected = self.deflect_planned(&planned, |_| Visit::default())?;
 
@@ -187,7 +221,7 @@ impl Generator<'_> {
                     let plan = plan?;
                     let (settled, scale) =
                         settled.expect("a planned command always has a deflection");
-                    let stream = [r, attempt, i as u64];
+                    let stream = [r, attempt, (first + i) as u64];
                     self.visible(stream, &settled, scale, collision, work)?;
                     Ok(Stop {
                         region: region.name.clone(),
@@ -213,7 +247,9 @@ impl Generator<'_> {
         Ok((accepted, counts))
     }
 
-    /// [`Generator::plan`] for every layout point, in parallel, in layout order.
+    /// [`Generator::plan`] for every layout point, in parallel, in layout order; `unit[0]` is the attempt's
+    /// point `first`.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn plan_all(
         &self,
         r: u64,
@@ -221,13 +257,17 @@ impl Generator<'_> {
         region: &RegionConfig,
         anchor: &[f64],
         unit: &[[f64; 3]],
+        first: usize,
         collision: &CollisionModel,
     ) -> Vec<std::result::Result<Planned, Reason>> {
         unit.par_iter()
             .enumerate()
             .map_init(
                 || self.work(),
-                |work, (i, u)| self.plan(r, attempt, i as u64, region, anchor, u, collision, work),
+                |work, (i, u)| {
+                    let i = (first + i) as u64;
+                    self.plan(r, attempt, i, region, anchor, u, collision, work)
+                },
             )
             .collect()
     }
@@ -379,6 +419,48 @@ impl Generator<'_> {
     }
 }
 
+/// One attempt of a region: its index, layout points and what planning them needs.
+struct Tried<'a> {
+    r: u64,
+    attempt: u64,
+    region: &'a RegionConfig,
+    anchor: &'a [f64],
+    unit: &'a [[f64; 3]],
+    collision: &'a CollisionModel,
+}
+
+/// What an attempt gave: its feasible candidates and counts, or only that it fails, with the next attempt's
+/// size.
+enum Attempt {
+    Done(Vec<Stop>, Rejections),
+    Failed(usize, Rejections),
+}
+
+/// The next attempt's candidate count after one of `tried` candidates gave `feasible`, aiming at `goal` feasible
+/// ones: more candidates the fewer were feasible (never fewer than twice as many as tried, at most
+/// `MAX_CANDIDATE_FACTOR` times `want`). Never increasing in `feasible`: every rounding on the way is monotone.
+fn next_count(goal: usize, feasible: usize, tried: usize, want: usize) -> usize {
+    let rate = feasible as f64 / tried.max(1) as f64;
+    let next = (goal as f64 / rate.max(0.02) * 1.25).ceil() as usize;
+    next.max(2 * tried).min(MAX_CANDIDATE_FACTOR * want)
+}
+
+/// The next attempt's size when an attempt of `tried` candidates has already `feasible` feasible ones and
+/// `turned_down` rejected ones, if the rest cannot change it: the attempt fails whatever the rest gives (fewer
+/// than `want` feasible at most), keeps at least one, and [`next_count`] is the same at both ends of what the
+/// feasible count can still be (so, it never increasing, in between).
+fn decided(
+    goal: usize,
+    want: usize,
+    tried: usize,
+    feasible: usize,
+    turned_down: usize,
+) -> Option<usize> {
+    let most = tried - turned_down;
+    let next = next_count(goal, feasible, tried, want);
+    (most < want && feasible > 0 && next == next_count(goal, most, tried, want)).then_some(next)
+}
+
 /// `want` of the feasible points `accepted` (at least that many), thinned evenly in layout order, so a grid stays
 /// a grid and a low-discrepancy set stays spread.
 fn thin_evenly(accepted: Vec<Stop>, want: usize) -> Vec<Stop> {
@@ -391,4 +473,43 @@ fn thin_evenly(accepted: Vec<Stop>, want: usize) -> Vec<Stop> {
         }
     }
     kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Wherever a partial attempt is taken as decided, every feasible count the whole attempt could have had
+    /// fails it and sizes the next attempt alike; and the usual case (a tenth turned down, three quarters
+    /// judged) is decided.
+    #[test]
+    fn a_decided_attempt_is_the_whole_attempt() {
+        let (mut decided_cases, mut usual) = (0, 0);
+        for want in [1_usize, 2, 5, 23, 45, 90, 188] {
+            for goal in [want, 3 * want] {
+                for tried in (want / 2).max(1)..=want {
+                    let judged = (3 * tried).div_ceil(4);
+                    for feasible in 0..=judged {
+                        let Some(next) = decided(goal, want, tried, feasible, judged - feasible)
+                        else {
+                            continue;
+                        };
+                        decided_cases += 1;
+                        for whole in feasible..=tried - (judged - feasible) {
+                            assert!(whole < want && whole > 0);
+                            assert_eq!(next_count(goal, whole, tried, want), next);
+                        }
+                    }
+                }
+            }
+            let judged = (3 * want).div_ceil(4);
+            let feasible = judged - judged.div_ceil(10);
+            if want >= 23 && decided(want, want, want, feasible, judged - feasible).is_some() {
+                usual += 1;
+            }
+        }
+        // The decided branch is taken often enough for the checks above to mean something (557 cases).
+        assert!(decided_cases > 500, "{decided_cases}");
+        assert_eq!(usual, 4);
+    }
 }

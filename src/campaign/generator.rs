@@ -90,7 +90,7 @@ impl Generator<'_> {
                                 state.scale = *scale;
                                 self.world
                                     .robot
-                                    .deflect(state)
+                                    .deflect_angles(state)
                                     .map(|_| (state.deflection(), *scale))
                             })
                             .transpose()

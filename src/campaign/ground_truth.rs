@@ -53,7 +53,7 @@ impl Generator<'_> {
             layout: LayoutKind::Uniform,
             ..region.clone()
         };
-        let planned = self.plan_all(r, attempt, region, &anchor, unit, &collision);
+        let planned = self.plan_all(r, attempt, region, &anchor, unit, 0, &collision);
         // Each evaluation pose is approached from the campaign's posture, at the end of the warm-up.
         let robot = &self.world.robot;
         let deflected = self.deflect_planned(&planned, |q| robot.evaluation_visit(q))?;

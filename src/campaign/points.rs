@@ -132,6 +132,19 @@ impl Rejections {
         *slot += 1;
     }
 
+    /// Adds the counts of `other`, more candidates of the same attempt.
+    pub(super) fn add(&mut self, other: &Rejections) {
+        self.candidates += other.candidates;
+        self.feasible += other.feasible;
+        self.used += other.used;
+        self.out_of_reach += other.out_of_reach;
+        self.joint_limits += other.joint_limits;
+        self.self_collision += other.self_collision;
+        self.environment_collision += other.environment_collision;
+        self.line_of_sight += other.line_of_sight;
+        self.acceptance_cone += other.acceptance_cone;
+    }
+
     pub(super) fn describe(&self) -> String {
         format!(
             "{} out of reach, {} at joint limits, {} in self-collision, {} hitting an obstacle, \

@@ -24,6 +24,10 @@ pub struct Obstacle {
     pub half_extents: [f64; 3],
 }
 
+/// A shape whose bounding sphere stays this far from an obstacle's box skips parry's exact test (m): a thousand
+/// times the f32 rounding of a pose a few metres out, so the exact test could not have found them touching.
+const OBSTACLE_CLEARANCE_M: f64 = 1e-3;
+
 /// One parry shape fixed to a body.
 #[derive(Clone)]
 struct BodyShape {
@@ -195,17 +199,32 @@ impl CollisionModel {
     /// First body that intersects the obstacle. Body 0 is skipped: the base stands on the table (or is
     /// bolted to the fixture), so it touches by construction.
     pub fn hits_obstacle(&self, frames: &Frames, obstacle: &Obstacle) -> Option<usize> {
-        let h = obstacle.half_extents;
-        let c = obstacle.center;
-        let boxed = BodyShape::new(
-            SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32),
-            Isometry3::identity(),
-        );
-        let box_world = Isometry3::translation(c[0], c[1], c[2]);
+        let (h, c) = (obstacle.half_extents, obstacle.center);
+        // A table's bounding sphere holds the whole arm, so the pair test's sphere check never rejects; a shape
+        // whose own sphere stays clear of the box by far more than parry's f32 resolution is disjoint from it.
+        let clear = |s: &BodyShape, body: &Isometry3<f64>| {
+            let centre = body * s.bound_center;
+            let outside = (0..3)
+                .map(|i| ((centre[i] - c[i]).abs() - h[i]).max(0.0).powi(2))
+                .sum::<f64>();
+            let reach = s.bound_radius + OBSTACLE_CLEARANCE_M;
+            outside > reach * reach
+        };
+        let mut boxed = None;
         (1..self.bodies.len()).find(|&b| {
-            self.bodies[b]
-                .iter()
-                .any(|s| shapes_intersect(&boxed, &box_world, s, &frames.body[b]))
+            self.bodies[b].iter().any(|s| {
+                if clear(s, &frames.body[b]) {
+                    return false;
+                }
+                let boxed = boxed.get_or_insert_with(|| {
+                    BodyShape::new(
+                        SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32),
+                        Isometry3::identity(),
+                    )
+                });
+                let box_world = Isometry3::translation(c[0], c[1], c[2]);
+                shapes_intersect(boxed, &box_world, s, &frames.body[b])
+            })
         })
     }
 
@@ -278,5 +297,82 @@ impl CollisionModel {
         Self::beam(from, to, end_clearance).is_some_and(|(dir, reach)| {
             (0..self.bodies.len()).any(|b| self.body_entry(frames, b, from, &dir, reach).is_some())
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Every body against `obstacle` by parry's exact test alone, as before the sphere check.
+    fn hits_exactly(model: &CollisionModel, frames: &Frames, obstacle: &Obstacle) -> Option<usize> {
+        let (h, c) = (obstacle.half_extents, obstacle.center);
+        let boxed = BodyShape::new(
+            SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32),
+            Isometry3::identity(),
+        );
+        let box_world = Isometry3::translation(c[0], c[1], c[2]);
+        (1..model.bodies.len()).find(|&b| {
+            model.bodies[b]
+                .iter()
+                .any(|s| shapes_intersect(&boxed, &box_world, s, &frames.body[b]))
+        })
+    }
+
+    /// The sphere check changes no answer: random iiwa configurations against a table under the base and boxes
+    /// placed about the arm, hits and misses both frequent.
+    #[test]
+    fn obstacle_check_agrees_with_the_exact_test() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/iiwa7.urdf");
+        let chain = crate::robot::urdf::load_file(&path, None).expect("robots/iiwa7.urdf loads");
+        let model = CollisionModel::new(&chain);
+        let mut frames = Frames::new(&chain);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (mut hits, mut misses) = (0, 0);
+        for k in 0..3000 {
+            let q: Vec<f64> = chain
+                .joints
+                .iter()
+                .map(|j| rng.random_range(j.lower..=j.upper))
+                .collect();
+            forward_kinematics(&chain, &q, &mut frames);
+            let obstacle = if k % 2 == 0 {
+                Obstacle {
+                    name: "table".into(),
+                    center: [0.0, 0.0, -0.05 + rng.random_range(0.0..0.3)],
+                    half_extents: [1.5, 1.5, 0.049],
+                }
+            } else {
+                let c = [
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(0.0..1.2),
+                ];
+                let h = [
+                    rng.random_range(0.01..0.2),
+                    rng.random_range(0.01..0.2),
+                    rng.random_range(0.01..0.2),
+                ];
+                Obstacle {
+                    name: "box".into(),
+                    center: c,
+                    half_extents: h,
+                }
+            };
+            let exact = hits_exactly(&model, &frames, &obstacle);
+            assert_eq!(
+                model.hits_obstacle(&frames, &obstacle),
+                exact,
+                "{q:?} {obstacle:?}"
+            );
+            if exact.is_some() {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 300 && misses > 300, "{hits} hits, {misses} misses");
     }
 }

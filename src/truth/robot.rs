@@ -309,6 +309,26 @@ impl TrueRobot {
         state: &mut TrueState,
         motion: Option<(&[f64], &[f64])>,
     ) -> Result<usize> {
+        let iters = self.fixed_point(state, motion)?;
+        self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+        Ok(iters)
+    }
+
+    /// [`TrueRobot::deflect`] without the frames of the settled arm (`state.frames` are left at the last
+    /// iterate): for a caller that keeps only the angles and tilts, or computes the frames again after
+    /// repeatability noise.
+    pub fn deflect_angles(&self, state: &mut TrueState) -> Result<usize> {
+        state.q.copy_from_slice(&state.q0);
+        state.tilt.fill(Vector3::zeros());
+        self.fixed_point(state, None)
+    }
+
+    /// The fixed-point iteration of [`TrueRobot::deflect_from_guess`], up to the settled angles and tilts.
+    fn fixed_point(
+        &self,
+        state: &mut TrueState,
+        motion: Option<(&[f64], &[f64])>,
+    ) -> Result<usize> {
         let tilting = self.tilts();
         for iter in 1..=FIXED_POINT_MAX_ITERS {
             self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
@@ -373,7 +393,6 @@ impl TrueRobot {
                 )));
             }
             if step < FIXED_POINT_TOL {
-                self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
                 return Ok(iter);
             }
         }
@@ -418,8 +437,10 @@ impl TrueRobot {
         }
         self.unloaded_angles_after(q_cmd, visit, &mut state.q0);
         state.scale = self.length_scale(visit);
-        self.deflect(state)?;
-        self.add_noise(noise, state);
+        self.deflect_angles(state)?;
+        if !self.add_noise(noise, state) {
+            self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+        }
         Ok(())
     }
 
@@ -439,11 +460,14 @@ impl TrueRobot {
             state.tilt.fill(Vector3::zeros());
         }
         state.scale = scale;
-        self.add_noise(noise, state);
-        self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+        if !self.add_noise(noise, state) {
+            self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+        }
     }
 
-    pub(crate) fn add_noise(&self, noise: Option<&mut ChaCha8Rng>, state: &mut TrueState) {
+    /// Adds the repeatability noise to `state.q` and computes the frames there; false (and nothing done) without
+    /// noise, when the caller's frames are its own to compute.
+    pub(crate) fn add_noise(&self, noise: Option<&mut ChaCha8Rng>, state: &mut TrueState) -> bool {
         let sigma = self.perturbation.repeatability_rad;
         if let (Some(rng), true) = (noise, sigma > 0.0) {
             let normal = Normal::new(0.0, sigma).expect("sigma validated positive and finite");
@@ -451,7 +475,9 @@ impl TrueRobot {
                 *q += normal.sample(rng);
             }
             self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
+            return true;
         }
+        false
     }
 
     /// How an evaluation pose `q_cmd` is reached: from the approach posture, at the end of the warm-up.
