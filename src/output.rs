@@ -369,6 +369,46 @@ fn out_err(path: &Path, message: impl std::fmt::Display) -> Error {
     Error::Invalid(format!("--out {}: {message}", path.display()))
 }
 
+/// `value` as `Display` writes it (`value.to_string()`), through ryu where that gives the same text. Both
+/// write the shortest digits that read back to `value` and, of those, the ones nearest to it; they differ
+/// only where two are equally near (ryu takes the even last digit, `Display` the larger:
+/// `-691780342843863.3` against ryu's `.2`). That needs `value`'s exact decimal expansion to end one digit
+/// after the shortest digits (at most 17), so ryu is taken only for a value whose expansion has more than 18
+/// significant digits ([`exact_digits_exceed_18`]; every value with a full mantissa, as computed ones have).
+/// ryu also writes an exponent (`1e16`, `1e-7`) where `Display` writes every zero, and `1.0` where it writes
+/// `1`: the rest goes to `Display`, into `fallback`. Property tests hold the two equal.
+pub fn display<'a>(value: f64, digits: &'a mut ryu::Buffer, fallback: &'a mut String) -> &'a str {
+    if value.is_finite() {
+        let text = digits.format_finite(value);
+        if !text.contains('e') && exact_digits_exceed_18(value, text) {
+            return text.strip_suffix(".0").unwrap_or(text);
+        }
+    }
+    use std::fmt::Write as _;
+    fallback.clear();
+    write!(fallback, "{value}").expect("a String takes any text");
+    fallback
+}
+
+/// Whether finite `value`, written `text` without an exponent, has more than 18 significant digits in its
+/// exact decimal expansion. With `k` binary fraction digits (the odd numerator of `value = n / 2^k`) the
+/// expansion has exactly `k` decimals, its last a 5; below 1 the first `p` of them are the zeros after the
+/// point, so it has `k − p` significant digits, and at least `k + 1` from 1 on.
+fn exact_digits_exceed_18(value: f64, text: &str) -> bool {
+    let bits = value.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    let mantissa = (bits & ((1 << 52) - 1)) | if biased == 0 { 0 } else { 1 << 52 };
+    if mantissa == 0 {
+        return false;
+    }
+    let fraction_bits = -(biased.max(1) - 1075 + mantissa.trailing_zeros() as i32);
+    let zeros_after_point =
+        text.trim_start_matches('-')
+            .strip_prefix("0.")
+            .map_or(0, |d| d.len() - d.trim_start_matches('0').len()) as i32;
+    fraction_bits >= 19 + zeros_after_point
+}
+
 /// A CSV file built in memory, numbers written as `Display` writes them (the shortest text that reads back as
 /// the same number): through one reused buffer, not a `String` per cell, which cost as much as the digits.
 pub struct CsvText {
@@ -401,11 +441,10 @@ impl CsvText {
 
     /// The next cell of the row: `value` as `value.to_string()` writes it.
     pub fn number(&mut self, value: f64) -> Result<()> {
-        use std::fmt::Write as _;
-        self.cell.clear();
-        write!(self.cell, "{value}").expect("a String takes any text");
+        let mut digits = ryu::Buffer::new();
+        let cell = display(value, &mut digits, &mut self.cell);
         self.writer
-            .write_field(&self.cell)
+            .write_field(cell)
             .map_err(|e| Error::Invalid(format!("{}: {e}", self.name)))
     }
 
@@ -431,7 +470,84 @@ impl CsvText {
 
 #[cfg(test)]
 mod tests {
+    use proptest::prelude::*;
+
     use super::*;
+
+    fn same_as_display(x: f64) {
+        let (mut digits, mut fallback) = (ryu::Buffer::new(), String::new());
+        assert_eq!(
+            display(x, &mut digits, &mut fallback),
+            x.to_string(),
+            "{x:?}"
+        );
+    }
+
+    #[test]
+    fn a_number_is_written_as_display_writes_it_at_the_edges() {
+        for x in [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            10.0,
+            0.1,
+            0.1 + 0.2,
+            1e-5,
+            1e-4,
+            0.00012345678901234567,
+            1e15,
+            1e16,
+            9.999999999999998e15,
+            9007199254740993.0,
+            1e21,
+            1e22,
+            123456789012345680.0,
+            5e-324,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            f64::MIN,
+            f64::EPSILON,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            // Exactly halfway between two shortest candidates: ryu's even digit against Display's larger one.
+            -691780342843863.3,
+            691780342843863.3,
+            1.0 + 2f64.powi(-17) * 0.5,
+            0.000244140625,
+        ] {
+            same_as_display(x);
+        }
+        let (mut digits, mut fallback) = (ryu::Buffer::new(), String::new());
+        for (x, fast) in [
+            (0.6038665254990336, true),
+            (3.274923269720183, true),
+            (0.5, false),
+        ] {
+            display(x, &mut digits, &mut fallback);
+            assert_eq!(fallback.is_empty(), fast, "{x} through ryu: {fast}");
+            fallback.clear();
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 20_000, failure_persistence: None, ..ProptestConfig::default() })]
+
+        #[test]
+        fn any_number_is_written_as_display_writes_it(
+            bits in any::<u64>(),
+            v in any::<f64>(),
+            near in -10.0..10.0f64,
+            scale in -30i32..30,
+        ) {
+            // Values of few binary digits, whose exact expansions are short: where ties lie.
+            let short = (bits >> (bits % 64)) as f64 * 2f64.powi(scale * 2);
+            for x in [f64::from_bits(bits), v, near, near * 1e3, near * 10f64.powi(scale), short] {
+                same_as_display(x);
+            }
+        }
+    }
 
     fn names(dir: &Path) -> Vec<String> {
         let mut v: Vec<String> = fs::read_dir(dir)

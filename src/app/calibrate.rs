@@ -20,7 +20,7 @@ use crate::dataset::{Dataset, TruthTable};
 use crate::error::{Error, Result};
 use crate::eval::iso_cubes::{self, CubesReport, Side};
 use crate::eval::split::{Parts, SplitRule};
-use crate::eval::tables::{BeforeAfter, BeforeAfterSummary};
+use crate::eval::tables::{BeforeAfter, BeforeAfterSummary, PointPrediction};
 use crate::eval::transfer::{self, TestRegistration};
 use crate::output;
 use crate::robot::dh::DhChain;
@@ -29,7 +29,7 @@ use crate::robot::{Chain, Payload};
 use super::calibration_report::{
     CalibrationReport, ClockReport, RegistrationReport, TestRegistrationReport, worse_than_nominal,
 };
-use super::predictions::predictions_csv;
+use super::predictions::{TestPredicted, predict_all, predictions_csv};
 use super::test_points;
 
 /// What to fit and where to test it (the flags of `calibrate`).
@@ -121,12 +121,13 @@ pub fn fit(options: &FitOptions) -> Result<FitOutcome> {
     output::check_dir(&options.out, &FIT_OUTPUTS)?;
     let inputs = read(options)?;
     let pair = fit_pair(options, &inputs)?;
-    // `predictions.csv` (every point predicted and written out) needs only the model: made on another core
+    let predicted = predict_all(pair.model(), &inputs.data);
+    // `predictions.csv` (every point's prediction written out) needs only the model: made on another core
     // while the model is judged.
     std::thread::scope(|s| {
-        let predictions =
-            s.spawn(|| predictions_csv(pair.model(), &inputs.data, &inputs.parts.labels));
-        let judged = judge(options, &inputs, &pair)?;
+        let (data, labels) = (&inputs.data, &inputs.parts.labels);
+        let predictions = s.spawn(|| predictions_csv(pair.model(), data, labels, &predicted));
+        let judged = judge(options, &inputs, &pair, &predicted)?;
         let points = test_points(&inputs, &pair, &judged)?;
         let report = report(options, &inputs, &pair, &judged, points.outside);
         let files = Files {
@@ -357,31 +358,47 @@ struct Judged {
     iso: Option<CubesReport>,
 }
 
-fn judge(options: &FitOptions, inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
-    let mut judged = match &inputs.test_file {
-        None => judge_split(inputs, pair)?,
-        Some(t) => judge_campaign(options, t, pair)?,
-    };
-    judged.truth = judge_truth(inputs, pair)?;
-    Ok(judged)
+/// `predicted`: the model's [`predict_all`] of the data.
+fn judge(
+    options: &FitOptions,
+    inputs: &Inputs,
+    pair: &FittedPair,
+    predicted: &[PointPrediction],
+) -> Result<Judged> {
+    match &inputs.test_file {
+        None => {
+            let test_predicted = TestPredicted::of(
+                inputs.test(),
+                &inputs.parts.test_indices,
+                (pair.model(), predicted),
+                pair.nominal.as_deref(),
+            );
+            let mut judged = judge_split(inputs, pair, &test_predicted)?;
+            judged.truth = judge_truth(inputs, pair, &test_predicted)?;
+            Ok(judged)
+        }
+        // `--truth` is refused with `--test-data` (`read_with`).
+        Some(t) => judge_campaign(options, t, pair),
+    }
 }
 
 /// On the test split, each model under its own registration.
-fn judge_split(inputs: &Inputs, pair: &FittedPair) -> Result<Judged> {
+fn judge_split(inputs: &Inputs, pair: &FittedPair, predicted: &TestPredicted) -> Result<Judged> {
     let (model, test, origin) = (pair.model(), inputs.test(), &inputs.data.origin);
     let observed = model
         .registration()
         .observe(test)
         .map_err(|e| e.in_data(origin, "the test split"))?;
-    let mut errors = BeforeAfter::of(model, &observed);
-    if pair.nominal.is_some() {
-        let nominal_obs = pair
-            .nominal()
-            .registration()
-            .observe(test)
-            .map_err(|e| e.in_data(origin, "the test split"))?;
-        errors = errors.measured_by(&BeforeAfter::of(pair.nominal(), &nominal_obs));
-    }
+    let nominal_obs = match pair.nominal.is_some() {
+        true => Some(
+            pair.nominal()
+                .registration()
+                .observe(test)
+                .map_err(|e| e.in_data(origin, "the test split"))?,
+        ),
+        false => None,
+    };
+    let errors = predicted.errors(&observed, nominal_obs.as_deref());
     let (nominal, registration) = (pair.nominal(), pair.nominal().registration());
     let iso = iso_cubes::cubes(
         test,
@@ -459,6 +476,7 @@ fn judge_campaign(options: &FitOptions, t: &Dataset, pair: &FittedPair) -> Resul
 fn judge_truth(
     inputs: &Inputs,
     pair: &FittedPair,
+    predicted: &TestPredicted,
 ) -> Result<Option<(BeforeAfter, BeforeAfterSummary)>> {
     let Some(t) = &inputs.truth else {
         return Ok(None);
@@ -472,14 +490,22 @@ fn judge_truth(
     for (i, o) in obs_truth.iter_mut().enumerate() {
         o.inputs = test.extra_inputs_of(i).to_vec();
     }
-    let mut e = BeforeAfter::of(model, &obs_truth);
-    if pair.nominal.is_some() {
-        let nominal_truth = pair
-            .nominal()
-            .registration()
-            .observe_points(&test.q, &t_test.in_tracker)?;
-        e = e.measured_by(&BeforeAfter::of(pair.nominal(), &nominal_truth));
-    }
+    let nominal_truth = match pair.nominal.is_some() {
+        true => {
+            let mut obs = pair
+                .nominal()
+                .registration()
+                .observe_points(&test.q, &t_test.in_tracker)?;
+            // The same inputs for the nominal model's (they do not move it: it has no regression), so its
+            // predictions of the test points serve here too.
+            for (o, m) in obs.iter_mut().zip(&obs_truth) {
+                o.inputs.clone_from(&m.inputs);
+            }
+            Some(obs)
+        }
+        false => None,
+    };
+    let e = predicted.errors(&obs_truth, nominal_truth.as_deref());
     let summary = e.summary()?;
     Ok(Some((e, summary)))
 }

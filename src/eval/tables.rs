@@ -4,11 +4,13 @@
 
 use std::fmt::Write as _;
 
+use nalgebra::{Point3, UnitQuaternion};
 use serde::Serialize;
 
 use super::stats::Stats;
 use super::transfer::Transfer;
-use crate::calib::method::Fitted;
+
+use crate::calib::method::{Fitted, Prediction};
 use crate::calib::tracker_frame::Observation;
 use crate::error::{Error, Result};
 
@@ -27,14 +29,44 @@ pub struct BeforeAfter {
     pub own_registration_before: Vec<f64>,
 }
 
+/// What a model says of one configuration: its nominal kinematics ([`Fitted::nominal`]: the measured point
+/// and the flange orientation) and its prediction ([`Fitted::predict_with`]).
+#[derive(Clone, Debug)]
+pub struct PointPrediction {
+    pub nominal: (Point3<f64>, UnitQuaternion<f64>),
+    pub predicted: Prediction,
+}
+
+impl PointPrediction {
+    /// `model` at `q` with the extra inputs `inputs`.
+    pub fn of(model: &dyn Fitted, q: &[f64], inputs: &[f64]) -> PointPrediction {
+        PointPrediction {
+            nominal: model.nominal(q),
+            predicted: model.predict_with(q, inputs),
+        }
+    }
+}
+
 impl BeforeAfter {
     /// `model` and its nominal kinematics against `observations` (measured, or true points seen through the
     /// model's registration).
     pub fn of(model: &dyn Fitted, observations: &[Observation]) -> BeforeAfter {
+        let predicted: Vec<PointPrediction> = observations
+            .iter()
+            .map(|o| PointPrediction::of(model, &o.q, &o.inputs))
+            .collect();
+        BeforeAfter::of_predicted(observations, &predicted)
+    }
+
+    /// [`BeforeAfter::of`] with the model's [`PointPrediction`] of each observation already made (one per
+    /// observation, in order): a caller that needs them elsewhere too computes them once.
+    pub fn of_predicted<'a>(
+        observations: &[Observation],
+        predicted: impl IntoIterator<Item = &'a PointPrediction>,
+    ) -> BeforeAfter {
         let mut e = BeforeAfter::default();
-        for o in observations {
-            let (nominal_p, nominal_r) = model.nominal(&o.q);
-            let pred = model.predict_with(&o.q, &o.inputs);
+        for (o, p) in observations.iter().zip(predicted) {
+            let ((nominal_p, nominal_r), pred) = (p.nominal, &p.predicted);
             e.before.push((o.position - nominal_p).norm());
             e.after.push((o.position - pred.position).norm());
             e.linearized
