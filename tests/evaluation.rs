@@ -15,9 +15,11 @@ use calibench::calib::regression::RegressionOptions;
 use calibench::campaign::Simulation;
 use calibench::eval::GroundTruth;
 use calibench::eval::accuracy::{EvaluationConfig, split_campaign};
-use calibench::eval::judge::{closed_loop_errors, test_errors, truth_errors};
+use calibench::eval::judge::{
+    PointErrors, closed_loop_errors, test_errors, test_errors_at, truth_errors, truth_set_errors,
+};
 use calibench::eval::{Oracle, centre};
-use calibench::robot::dh::DhChain;
+use calibench::robot::dh::{ChainPose, DhChain};
 use calibench::scenario::Scenario;
 use calibench::truth::TrueState;
 use nalgebra::Point3;
@@ -109,6 +111,49 @@ fn the_oracle_test_error_is_the_tracker_noise_and_its_truth_error_is_zero() {
         assert_eq!(e.position.len(), set.points.len());
         let max = e.position.iter().copied().fold(0.0, f64::max);
         assert!(max <= 1e-9, "oracle {name} error {max:.3e} m");
+    }
+}
+
+/// The study judges every run through the nominal chain's poses computed once ([`ChainPose`]): every method
+/// must give there the bits it gives predicting at each configuration, or the study's figures would move.
+#[test]
+fn judging_through_the_truths_poses_gives_the_bits_of_predicting_at_each_configuration() {
+    let f = paper();
+    let (train, val, test) =
+        split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
+    let ctx = FitContext::of(&f.sim.world);
+    let poses: Vec<ChainPose> = test.q.iter().map(|q| f.truth.nominal.pose(q)).collect();
+    let bits = |e: &PointErrors| {
+        let b = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        (b(&e.position), b(&e.orientation))
+    };
+    for kind in MethodKind::ALL {
+        let model = kind.fit(&ctx, &train, &val).unwrap();
+        let model = model.as_ref();
+        // Else the poses would not be used and the comparison below would hold trivially.
+        assert!(model.dh() == &f.truth.nominal, "{}", model.method());
+        for set in [&f.truth.grid, &f.truth.shell] {
+            let through_poses = truth_set_errors(model, &f.truth, set);
+            let at_each = truth_errors(model, &f.truth, &set.points);
+            assert_eq!(bits(&through_poses), bits(&at_each), "{}", model.method());
+        }
+        let through_poses = test_errors_at(model, &test, Some((&f.truth.nominal, &poses))).unwrap();
+        let at_each = test_errors(model, &test).unwrap();
+        assert_eq!(bits(&through_poses), bits(&at_each), "{}", model.method());
+        for (q, pose) in test.q.iter().zip(&poses) {
+            let p = model.predict_with(q, &[]);
+            let (position, orientation) = model.point_at(pose, &[]);
+            assert_eq!(
+                position.coords.map(f64::to_bits),
+                p.position.coords.map(f64::to_bits)
+            );
+            assert_eq!(
+                orientation.coords.map(f64::to_bits),
+                p.orientation.coords.map(f64::to_bits),
+                "{}",
+                model.method()
+            );
+        }
     }
 }
 

@@ -123,10 +123,24 @@ pub fn flange_pose_with_errors(dh: &DhChain, q: &[f64], errors: &FrameErrors) ->
         n,
         "configuration length must equal the chain's dof"
     );
-    assert_eq!(errors.len(), n, "one error row per DH frame");
+    let links = q
+        .iter()
+        .enumerate()
+        .map(|(i, &qi)| dh.link_transform(i, qi));
+    flange_pose_with_errors_on(dh, links, errors)
+}
+
+/// [`flange_pose_with_errors`] from the link transforms `A_i(q_i)` (a [`ChainPose`](crate::robot::dh::ChainPose)'s): the same products in
+/// the same order, so the same bits.
+pub fn flange_pose_with_errors_on(
+    dh: &DhChain,
+    links: impl Iterator<Item = Isometry3<f64>>,
+    errors: &FrameErrors,
+) -> Isometry3<f64> {
+    assert_eq!(errors.len(), dh.dof(), "one error row per DH frame");
     let mut pose = dh.base;
-    for (i, (&qi, e)) in q.iter().zip(errors).enumerate() {
-        pose *= dh.link_transform(i, qi);
+    for (link, e) in links.zip(errors) {
+        pose *= link;
         // Skipping zero rows keeps e = 0 bit-identical to the nominal model.
         if e.iter().any(|&v| v != 0.0) {
             pose *= error_transform(e);

@@ -19,7 +19,7 @@ use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::numeric;
-use crate::robot::dh::DhChain;
+use crate::robot::dh::{ChainPose, DhChain};
 use crate::robot::kinematics::joint_column;
 use crate::robot::plausible;
 use crate::robot::{Chain, Payload};
@@ -222,6 +222,13 @@ pub trait Fitted: Any + Send + Sync {
         let _ = inputs;
         self.predict(q)
     }
+    /// [`Fitted::predict_with`]'s position and orientation, the same bits, at `pose`: a configuration with
+    /// the links and frames of this model's nominal chain ([`Fitted::dh`]) computed once for every model
+    /// judged there (a method that uses the nominal chain skips its own pass over it).
+    fn point_at(&self, pose: &ChainPose, inputs: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
+        let p = self.predict_with(&pose.q, inputs);
+        (p.position, p.orientation)
+    }
     /// The calibrated flange pose the prediction implies: the predicted orientation, placed so that it carries
     /// the mounting onto the predicted point. For a rigid model this is the model's own flange; an evaluation
     /// uses it to put the measured point elsewhere on the flange (a probe remounted between campaigns).
@@ -269,22 +276,19 @@ pub trait Fitted: Any + Send + Sync {
         let mut q = seed.to_vec();
         let mut err = f64::INFINITY;
         for _ in 0..20 {
-            let pred = self.predict_with(&q, inputs);
-            if !numeric::all_finite(
-                pred.position
-                    .coords
-                    .iter()
-                    .chain(pred.orientation.coords.iter()),
-            ) {
+            // One pass over the nominal chain for the prediction and the Jacobian.
+            let pose = self.dh().pose(&q);
+            let (position, orientation) = self.point_at(&pose, inputs);
+            if !numeric::all_finite(position.coords.iter().chain(orientation.coords.iter())) {
                 return Err(Error::Invalid(format!(
                     "the model's prediction is not a finite number at joints {}: the configuration is far \
                      outside what the model was fitted on",
                     short_list(&q)
                 )));
             }
-            let dp = target - pred.position;
+            let dp = target - position;
             let dr = rotation.map_or(Vector3::zeros(), |r| {
-                (r * pred.orientation.inverse()).scaled_axis()
+                (r * orientation.inverse()).scaled_axis()
             });
             err = dp.norm();
             if err > MAX_CORRECTION_M || dr.norm() > MAX_CORRECTION_RAD {
@@ -305,7 +309,8 @@ pub trait Fitted: Any + Send + Sync {
             if rows == 6 {
                 rhs.fixed_rows_mut::<3>(3).copy_from(&dr);
             }
-            let j = nominal_jacobian(self.dh(), &self.registration().frame.mounting, &q);
+            let mounting = &self.registration().frame.mounting;
+            let j = nominal_jacobian_on(self.dh(), mounting, &pose.frames);
             let step = numeric::svd(j.rows(0, rows).into_owned(), true, true, "inverse")?
                 .solve(&rhs, 1e-12)
                 .map_err(|e| Error::Invalid(format!("inverse: singular Jacobian ({e})")))?;
@@ -358,7 +363,15 @@ pub const MAX_INVERSE_STEP_RAD: f64 = 1.0;
 /// Geometric Jacobian of a point fixed to the flange (rows 0–2) and of the flange rotation (rows 3–5), for the
 /// nominal DH chain.
 pub fn nominal_jacobian(dh: &DhChain, point_in_flange: &Point3<f64>, q: &[f64]) -> DMatrix<f64> {
-    let frames = dh.frames(q);
+    nominal_jacobian_on(dh, point_in_flange, &dh.frames(q))
+}
+
+/// [`nominal_jacobian`] on the DH frames of the configuration (`dh.frames(q)`, or a [`ChainPose`]'s).
+pub fn nominal_jacobian_on(
+    dh: &DhChain,
+    point_in_flange: &Point3<f64>,
+    frames: &[Isometry3<f64>],
+) -> DMatrix<f64> {
     let n = dh.dof();
     let p = frames[n] * dh.tool * point_in_flange;
     let mut j = DMatrix::zeros(6, n);

@@ -10,14 +10,14 @@
 //! 4. Predict: the modelled `E_i` go into the full kinematics (eq. 6); position from the position parameters,
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix3xX, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix3xX, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::domain::Domain;
 use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian_on, flange_pose_with_errors,
-    frame_errors, select_params,
+    flange_pose_with_errors_on, frame_errors, select_params,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
@@ -25,6 +25,7 @@ use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::numeric;
+use crate::robot::dh::ChainPose;
 use crate::robot::plausible;
 
 /// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
@@ -448,39 +449,58 @@ impl PaperModel {
     /// Predicted measured point and flange orientation for configuration `q` and extra inputs `inputs`.
     fn prediction(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let dh = &self.basis.dh;
-        // One pass over the chain for the nominal pose and the Jacobian's frames (`flange_pose` multiplies
-        // the same links in the same order).
-        let frames = dh.frames(q);
-        let nominal = frames[dh.dof()] * dh.tool;
-        let (ep, eo) = self.parameters_at(q, inputs, &nominal);
-        // Without parameters the chain with errors is the nominal one, bit for bit (zero rows are skipped).
-        let with_errors = |models: &[ParameterModel], values: &[f64]| {
-            if models.is_empty() {
-                nominal
-            } else {
-                flange_pose_with_errors(dh, q, &self.frame_errors_of(models, values))
-            }
-        };
-        let position = with_errors(&self.position, &ep) * self.basis.registration.frame.mounting;
-        let orientation = with_errors(&self.orientation, &eo).rotation;
+        let mounting = self.basis.registration.frame.mounting;
+        // `nominal`: the nominal chain alone (`predicted_at`'s flange, the same products).
+        if self.position.is_empty() && self.orientation.is_empty() {
+            let flange = dh.flange_pose(q);
+            let position = flange * mounting;
+            return Prediction {
+                position,
+                linearized_position: position,
+                orientation: flange.rotation,
+            };
+        }
+        // One pass over the chain for the nominal pose, the Jacobian's frames and the links of the chain
+        // with errors (`flange_pose` multiplies the same links in the same order).
+        let pose = dh.pose(q);
+        let (position, orientation, ep) = self.predicted_at(&pose, inputs);
+        let nominal = pose.flange(dh) * mounting;
         let linearized_position = if self.position.is_empty() {
-            nominal * self.basis.registration.frame.mounting
+            nominal
         } else {
             let params: Vec<ErrorParam> = self.position.iter().map(|m| m.param).collect();
-            let j = error_jacobian_on(
-                dh,
-                &frames,
-                &self.basis.registration.frame.mounting,
-                &params,
-            );
-            nominal * self.basis.registration.frame.mounting
-                + j.fixed_rows::<3>(0) * DVector::from_vec(ep)
+            let j = error_jacobian_on(dh, &pose.frames, &mounting, &params);
+            nominal + j.fixed_rows::<3>(0) * DVector::from_vec(ep)
         };
         Prediction {
             position,
             linearized_position,
             orientation,
         }
+    }
+
+    /// The predicted measured point and flange orientation at `pose` (of the model's nominal chain), and the
+    /// position parameters there.
+    fn predicted_at(
+        &self,
+        pose: &ChainPose,
+        inputs: &[f64],
+    ) -> (Point3<f64>, UnitQuaternion<f64>, Vec<f64>) {
+        let dh = &self.basis.dh;
+        let nominal = pose.flange(dh);
+        let (ep, eo) = self.parameters_at(&pose.q, inputs, &nominal);
+        // Without parameters the chain with errors is the nominal one, bit for bit (zero rows are skipped).
+        let with_errors = |models: &[ParameterModel], values: &[f64]| {
+            if models.is_empty() {
+                nominal
+            } else {
+                let errors = self.frame_errors_of(models, values);
+                flange_pose_with_errors_on(dh, pose.links.iter().copied(), &errors)
+            }
+        };
+        let position = with_errors(&self.position, &ep) * self.basis.registration.frame.mounting;
+        let orientation = with_errors(&self.orientation, &eo).rotation;
+        (position, orientation, ep)
     }
 }
 
@@ -591,6 +611,11 @@ impl Fitted for PaperModel {
 
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         self.prediction(q, inputs)
+    }
+
+    fn point_at(&self, pose: &ChainPose, inputs: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
+        let (position, orientation, _) = self.predicted_at(pose, inputs);
+        (position, orientation)
     }
 
     /// The error parameters of the paper's models are regressions; `nominal` has none.

@@ -36,7 +36,7 @@ use super::tracker_frame::{
 };
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::robot::dh::DhChain;
+use crate::robot::dh::{ChainPose, DhChain};
 use crate::robot::plausible;
 
 pub const RESIDUAL_RIDGE: MethodInfo = MethodInfo {
@@ -264,6 +264,12 @@ impl ResidualModel {
     fn reference(&self, q: &[f64]) -> Reference {
         nominal_reference(&self.basis.dh, &self.basis.registration, q)
     }
+
+    /// `reference` (the nominal prediction at `q`) with the residual added, weighted by the domain.
+    fn corrected(&self, q: &[f64], inputs: &[f64], reference: &Reference) -> Reference {
+        let w = self.basis.domain.weight(q, inputs);
+        self.residual.apply_with_offset(q, inputs, reference, w).0
+    }
 }
 
 /// `predict_with`'s mean position error on the validation points, with their references and modelled offsets
@@ -308,15 +314,19 @@ impl Fitted for ResidualModel {
 
     /// Outside the training domain the residual is weighted as [`Domain::weight`] says.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
-        let w = self.basis.domain.weight(q, inputs);
-        let ((position, orientation), _) =
-            self.residual
-                .apply_with_offset(q, inputs, &self.reference(q), w);
+        let (position, orientation) = self.corrected(q, inputs, &self.reference(q));
         Prediction {
             position,
             linearized_position: position,
             orientation,
         }
+    }
+
+    fn point_at(&self, pose: &ChainPose, inputs: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
+        // `nominal_reference`'s flange, from the pose's frames: the same products.
+        let f = pose.flange(&self.basis.dh);
+        let reference = (f * self.basis.registration.frame.mounting, f.rotation);
+        self.corrected(&pose.q, inputs, &reference)
     }
 
     fn models_orientation(&self) -> bool {
@@ -460,6 +470,15 @@ impl Fitted for HybridFitted {
 
     /// The base predicts from the joint angles (its residual was fitted against exactly that); the extra
     /// inputs go to the residual model.
+    fn point_at(&self, pose: &ChainPose, inputs: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
+        let p = self.base.point_at(pose, &[]);
+        let w = self.basis().domain.weight(&pose.q, inputs);
+        self.saved
+            .residual
+            .apply_with_offset(&pose.q, inputs, &p, w)
+            .0
+    }
+
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let p = self.base.predict(q);
         let w = self.basis().domain.weight(q, inputs);

@@ -19,6 +19,7 @@ use crate::campaign::{CampaignConfig, RegionConfig, Rejections, Simulation};
 use crate::dataset::{Dataset, random_split};
 use crate::error::{Error, Result};
 use crate::measurements::as_dataset;
+use crate::robot::dh::ChainPose;
 use crate::truth::TrueRobot;
 
 fn default_methods() -> Vec<MethodKind> {
@@ -241,7 +242,7 @@ pub fn split_campaign(
 /// Every view of one fitted method, for `evaluation.json`.
 pub fn evaluate_method(
     model: &dyn Fitted,
-    test: &Dataset,
+    test: (&Dataset, &[ChainPose]),
     truth: &GroundTruth,
     robot: &TrueRobot,
 ) -> Result<MethodReport> {
@@ -303,18 +304,20 @@ pub fn judge_all(
     let world = &sim.world;
     let (train, val, test) = (&fits.train, &fits.val, &fits.test);
     let truth = GroundTruth::build(world, campaign, regions, &config.ground_truth())?;
+    let poses: Vec<ChainPose> = test.q.par_iter().map(|q| truth.nominal.pose(q)).collect();
+    let posed = (test, &poses[..]);
     let mut methods: Vec<MethodReport> = fits
         .models
         .par_iter()
         .map(|(kind, model)| match model {
-            Ok(model) => evaluate_method(model.as_ref(), test, &truth, &world.robot)
+            Ok(model) => evaluate_method(model.as_ref(), posed, &truth, &world.robot)
                 .unwrap_or_else(|e| MethodReport::failed(kind.info(), &e)),
             Err(e) => MethodReport::failed(kind.info(), e),
         })
         .collect();
     let oracle = Oracle::new(world)?.registered_on(&[train, val])?;
     methods.push(
-        evaluate_method(&oracle, test, &truth, &world.robot)
+        evaluate_method(&oracle, posed, &truth, &world.robot)
             .unwrap_or_else(|e| MethodReport::failed(&ORACLE, &e)),
     );
     Ok(Evaluation {

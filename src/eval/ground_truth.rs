@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use rand::Rng;
+use rayon::prelude::*;
 
 use super::oracle::nest_rotation;
 use crate::calib::method::Fitted;
@@ -18,6 +19,7 @@ use crate::campaign::ground_truth::{GROUND_TRUTH_ATTEMPT, TruePoint};
 use crate::campaign::{CampaignConfig, Generator, LayoutKind, RegionConfig, Rejections};
 use crate::error::Result;
 use crate::rng::Stream;
+use crate::robot::dh::{ChainPose, DhChain};
 use crate::world::World;
 
 /// No ground-truth set may ask for more points than this per region.
@@ -66,6 +68,9 @@ pub struct TruthSet {
     pub points: Vec<TruePoint>,
     /// Per region: candidates, feasible, and why the others were dropped.
     pub rejections: BTreeMap<String, Rejections>,
+    /// The nominal chain ([`GroundTruth::nominal`]) at each point's command, for the sets every fitted model
+    /// is judged on (the grid and the shell; empty for the others): computed once, not once per model.
+    pub poses: Vec<ChainPose>,
 }
 
 /// What the evaluation knows that no method does.
@@ -83,6 +88,8 @@ pub struct GroundTruth {
     pub shell: TruthSet,
     /// Closed-loop targets: uniform in each region.
     pub closed_loop: TruthSet,
+    /// The nominal DH chain of the sets' `poses`.
+    pub nominal: DhChain,
 }
 
 /// Set numbers: each draws its own layouts and orientations.
@@ -140,7 +147,15 @@ impl GroundTruth {
                 );
             }
         }
+        for set in [&mut grid, &mut shell] {
+            set.poses = set
+                .points
+                .par_iter()
+                .map(|p| world.dh.pose(&p.q_cmd))
+                .collect();
+        }
         Ok(GroundTruth {
+            nominal: world.dh.clone(),
             tracker_pose: world.tracker.pose,
             measured_point: super::centre(&world.mounting.actual),
             nest_rotation: nest_rotation(&world.mounting)?,

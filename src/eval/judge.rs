@@ -11,16 +11,17 @@
 //! Closed-loop targets go into the method's frame as the ground truth's points do
 //! ([`GroundTruth::to_method`]), and the distance is taken in the world frame.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, UnitQuaternion};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::ground_truth::GroundTruth;
+use super::ground_truth::{GroundTruth, TruthSet};
 use crate::calib::method::Fitted;
 use crate::campaign::RegionConfig;
 use crate::campaign::ground_truth::TruePoint;
 use crate::dataset::Dataset;
 use crate::error::Result;
+use crate::robot::dh::{ChainPose, DhChain};
 use crate::truth::{TrueRobot, TrueState};
 
 /// Per-point errors of one view: distances (m) and, where the data has it, orientation angles (rad).
@@ -35,21 +36,66 @@ pub struct PointErrors {
 
 /// Measured (the tracker, through the method's registration) vs predicted, on held-out data.
 pub fn test_errors(model: &dyn Fitted, test: &Dataset) -> Result<PointErrors> {
+    test_errors_at(model, test, None)
+}
+
+/// [`test_errors`], the model predicting through `poses` (a [`ChainPose`] of `test`'s every configuration on a
+/// nominal chain) where that chain is the model's own.
+pub fn test_errors_at(
+    model: &dyn Fitted,
+    test: &Dataset,
+    poses: Option<(&DhChain, &[ChainPose])>,
+) -> Result<PointErrors> {
     let observations = model.registration().observe(test)?;
+    let poses = usable(model, poses, observations.len());
     let mut e = PointErrors::default();
-    for o in &observations {
-        let pred = model.predict_with(&o.q, &o.inputs);
-        e.position.push((o.position - pred.position).norm());
+    for (i, o) in observations.iter().enumerate() {
+        let (position, orientation) = predicted(model, &o.q, poses.map(|p| &p[i]), &o.inputs);
+        e.position.push((o.position - position).norm());
         if let Some(measured) = o.orientation {
-            e.orientation.push(measured.angle_to(&pred.orientation));
+            e.orientation.push(measured.angle_to(&orientation));
         }
     }
     Ok(e)
 }
 
+/// `poses` where they are of the model's own nominal chain, one per each of `n` points (else the model
+/// evaluates at the configurations themselves).
+fn usable<'a>(
+    model: &dyn Fitted,
+    poses: Option<(&DhChain, &'a [ChainPose])>,
+    n: usize,
+) -> Option<&'a [ChainPose]> {
+    poses
+        .filter(|(chain, poses)| poses.len() == n && *chain == model.dh())
+        .map(|(_, poses)| poses)
+}
+
+/// The model's position and orientation at `q`, through its nominal chain's `pose` there where given.
+fn predicted(
+    model: &dyn Fitted,
+    q: &[f64],
+    pose: Option<&ChainPose>,
+    inputs: &[f64],
+) -> (Point3<f64>, UnitQuaternion<f64>) {
+    match pose {
+        Some(pose) => model.point_at(pose, inputs),
+        None => {
+            let p = model.predict_with(q, inputs);
+            (p.position, p.orientation)
+        }
+    }
+}
+
 /// True (mapped into the method's frame) vs predicted at the commands of `points`.
 pub fn truth_errors(model: &dyn Fitted, truth: &GroundTruth, points: &[TruePoint]) -> PointErrors {
     truth_errors_with(model, truth, points, &[])
+}
+
+/// [`truth_errors`] on one of the truth's sets, through the nominal chain's poses it holds.
+pub fn truth_set_errors(model: &dyn Fitted, truth: &GroundTruth, set: &TruthSet) -> PointErrors {
+    let poses = usable(model, Some((&truth.nominal, &set.poses)), set.points.len());
+    errors_at(model, truth, &set.points, poses, &[])
 }
 
 /// [`truth_errors`] with the model's extra inputs set to `inputs` at every point (empty: their training means).
@@ -59,18 +105,30 @@ pub fn truth_errors_with(
     points: &[TruePoint],
     inputs: &[f64],
 ) -> PointErrors {
+    errors_at(model, truth, points, None, inputs)
+}
+
+/// [`truth_errors_with`], through `poses` (one per point, of the model's nominal chain) where given.
+fn errors_at(
+    model: &dyn Fitted,
+    truth: &GroundTruth,
+    points: &[TruePoint],
+    poses: Option<&[ChainPose]>,
+    inputs: &[f64],
+) -> PointErrors {
     let to_method = truth.to_method(model);
     let with_orientation = model.registration().measures_orientation();
     let per_point: Vec<(f64, Option<f64>)> = points
         .par_iter()
-        .map(|p| {
-            let pred = model.predict_with(&p.q_cmd, inputs);
+        .enumerate()
+        .map(|(i, p)| {
+            let (predicted, rotation) = predicted(model, &p.q_cmd, poses.map(|s| &s[i]), inputs);
             let position = to_method * truth.position(&p.true_flange);
             let angle = truth
                 .orientation(&p.true_flange)
                 .filter(|_| with_orientation)
-                .map(|r| (to_method.rotation * r).angle_to(&pred.orientation));
-            ((position - pred.position).norm(), angle)
+                .map(|r| (to_method.rotation * r).angle_to(&rotation));
+            ((position - predicted).norm(), angle)
         })
         .collect();
     let mut e = PointErrors::default();
@@ -79,6 +137,23 @@ pub fn truth_errors_with(
         e.orientation.extend(a);
     }
     e
+}
+
+/// The position errors at `points` of a model whose predictions there are `predicted` already: those of
+/// [`truth_errors`], for a model whose predictions are the same every time but for its registration, which
+/// only moves the truth into its frame (the oracle registered on each campaign: the true robot).
+pub fn truth_position_errors(
+    model: &dyn Fitted,
+    truth: &GroundTruth,
+    points: &[TruePoint],
+    predicted: &[Point3<f64>],
+) -> Vec<f64> {
+    let to_method = truth.to_method(model);
+    points
+        .iter()
+        .zip(predicted)
+        .map(|(p, predicted)| (to_method * truth.position(&p.true_flange) - predicted).norm())
+        .collect()
 }
 
 /// Closed loop: each point's target pose (the flange pose its command reaches on the nominal model, carrying
@@ -146,16 +221,18 @@ pub struct Judgement {
 
 /// Judges `model` in every view: on the held-out `test` data, and on `truth` — its grid, its shell and its
 /// closed-loop targets, reached on the true arm `robot`.
+/// `test_poses`: the truth's nominal chain ([`GroundTruth::nominal`]) at every test configuration, computed
+/// once for every model judged on them (empty: each model evaluates at the configurations).
 pub fn judge(
     model: &dyn Fitted,
-    test: &Dataset,
+    (test, test_poses): (&Dataset, &[ChainPose]),
     truth: &GroundTruth,
     robot: &TrueRobot,
 ) -> Result<Judgement> {
     Ok(Judgement {
-        test: test_errors(model, test)?,
-        grid: truth_errors(model, truth, &truth.grid.points),
-        shell: truth_errors(model, truth, &truth.shell.points),
+        test: test_errors_at(model, test, Some((&truth.nominal, test_poses)))?,
+        grid: truth_set_errors(model, truth, &truth.grid),
+        shell: truth_set_errors(model, truth, &truth.shell),
         closed_loop: closed_loop_errors(model, truth, robot, &truth.closed_loop.points),
     })
 }
@@ -212,8 +289,8 @@ pub fn by_distance(
                 .copied()
                 .collect()
         } else {
-            let mut e = truth_errors(model, truth, &truth.grid.points).position;
-            e.extend(truth_errors(model, truth, &truth.shell.points).position);
+            let mut e = truth_set_errors(model, truth, &truth.grid).position;
+            e.extend(truth_set_errors(model, truth, &truth.shell).position);
             e
         };
         // Band 0 is inside; band i ≥ 1 is (edge[i-2], edge[i-1]], the last one beyond every edge.

@@ -32,7 +32,7 @@ use super::plausible;
 use crate::error::{Error, Result};
 
 /// One link of eq. 1. For a revolute joint θ = q + `theta_offset`; for a prismatic one d = `d` + q.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DhRow {
     pub theta_offset: f64,
     pub d: f64,
@@ -50,13 +50,32 @@ fn is_zero(v: &f64) -> bool {
 }
 
 /// A chain in DH form: `base · A_1(q_1) ⋯ A_n(q_n) · tool` is the flange pose.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DhChain {
     /// Pose of DH frame 0 in the world frame.
     pub base: Isometry3<f64>,
     pub rows: Vec<DhRow>,
     /// Pose of the flange in DH frame n.
     pub tool: Isometry3<f64>,
+}
+
+/// A configuration with a chain's link transforms and frames there ([`DhChain::pose`]): computed once where
+/// many models of the same nominal chain are evaluated at the same configurations (a study judges every run
+/// on the same ground truth), and in one pass where one model needs both.
+#[derive(Clone, Debug)]
+pub struct ChainPose {
+    pub q: Vec<f64>,
+    /// `A_i(q_i)`, one per joint ([`DhChain::link_transform`]).
+    pub links: Vec<Isometry3<f64>>,
+    /// DH frames 0..=n: [`DhChain::frames`]'s products, so the same bits.
+    pub frames: Vec<Isometry3<f64>>,
+}
+
+impl ChainPose {
+    /// [`DhChain::flange_pose`] at the pose's configuration (the same products), for the chain it was made on.
+    pub fn flange(&self, dh: &DhChain) -> Isometry3<f64> {
+        self.frames[self.links.len()] * dh.tool
+    }
 }
 
 /// Below this sine of the angle between consecutive axes they are treated as parallel. Rounding in URDF
@@ -238,6 +257,32 @@ impl DhChain {
             out.push(pose);
         }
         out
+    }
+
+    /// The configuration `q` with its link transforms and frames ([`ChainPose`]).
+    pub fn pose(&self, q: &[f64]) -> ChainPose {
+        assert_eq!(
+            q.len(),
+            self.dof(),
+            "configuration length must equal the chain's dof"
+        );
+        let links: Vec<Isometry3<f64>> = q
+            .iter()
+            .enumerate()
+            .map(|(i, &qi)| self.link_transform(i, qi))
+            .collect();
+        let mut frames = Vec::with_capacity(q.len() + 1);
+        let mut pose = self.base;
+        frames.push(pose);
+        for link in &links {
+            pose *= link;
+            frames.push(pose);
+        }
+        ChainPose {
+            q: q.to_vec(),
+            links,
+            frames,
+        }
     }
 
     pub fn flange_pose(&self, q: &[f64]) -> Isometry3<f64> {

@@ -88,6 +88,13 @@ pub(super) fn region_truth(truth: &GroundTruth, region: &str) -> GroundTruth {
             .filter(|p| p.region == region)
             .cloned()
             .collect(),
+        poses: set
+            .poses
+            .iter()
+            .zip(&set.points)
+            .filter(|(_, p)| p.region == region)
+            .map(|(pose, _)| pose.clone())
+            .collect(),
         rejections: set
             .rejections
             .iter()
@@ -96,6 +103,7 @@ pub(super) fn region_truth(truth: &GroundTruth, region: &str) -> GroundTruth {
             .collect(),
     };
     GroundTruth {
+        nominal: truth.nominal.clone(),
         tracker_pose: truth.tracker_pose,
         measured_point: truth.measured_point,
         nest_rotation: truth.nest_rotation,

@@ -36,15 +36,20 @@ use crate::design::layout::PointDesign;
 use crate::design::{DesignModel, Indices};
 use crate::error::{Error, Result};
 use crate::eval::GroundTruth;
-use crate::eval::judge::{by_distance, judge, test_errors, truth_errors};
+use crate::eval::judge::{by_distance, judge, test_errors, truth_position_errors};
 use crate::eval::{Oracle, Stats};
 use crate::measurements::as_dataset;
+use crate::robot::dh::ChainPose;
 use crate::world::World;
 
 /// What every run of one region shares.
 struct RegionSets {
     test: Dataset,
+    /// The nominal chain at every test configuration, for every run's judging.
+    test_poses: Vec<ChainPose>,
     truth: GroundTruth,
+    /// The oracle's predictions on the grid: the true robot's, the same for every campaign's oracle.
+    oracle_grid: Option<Vec<Point3<f64>>>,
     limits: super::Limits,
 }
 
@@ -264,13 +269,21 @@ fn region_sets(measure: &Measure, config: &StudyConfig) -> Result<Vec<RegionSets
                         e.detail()
                     ))
                 })?;
+            let test = as_dataset(
+                &campaign,
+                &format!("the test set of region '{}'", region.name),
+            )?;
+            let truth = region_truth(&truth, &region.name);
+            let oracle_grid = Oracle::new(world).ok().map(|oracle| {
+                let grid = truth.grid.points.par_iter();
+                grid.map(|p| oracle.predict(&p.q_cmd).position).collect()
+            });
             Ok(RegionSets {
                 limits: super::Limits::of(world, &region.name, &campaign),
-                test: as_dataset(
-                    &campaign,
-                    &format!("the test set of region '{}'", region.name),
-                )?,
-                truth: region_truth(&truth, &region.name),
+                test_poses: test.q.par_iter().map(|q| world.dh.pose(q)).collect(),
+                test,
+                truth,
+                oracle_grid,
             })
         })
         .collect()
@@ -439,13 +452,17 @@ impl Shared<'_> {
                 }
             };
             let sets = &self.regions[job.region];
-            let floor_mean = Oracle::new(self.world)
-                .and_then(|o| o.registered_on(&[&train, &val]))
-                .ok()
-                .and_then(|oracle| {
-                    Stats::of(&truth_errors(&oracle, &sets.truth, &sets.truth.grid.points).position)
-                })
-                .map(|s| s.mean);
+            let floor_mean = sets.oracle_grid.as_ref().and_then(|predicted| {
+                let oracle = Oracle::new(self.world).and_then(|o| o.registered_on(&[&train, &val]));
+                let grid = &sets.truth.grid.points;
+                Stats::of(&truth_position_errors(
+                    &oracle.ok()?,
+                    &sets.truth,
+                    grid,
+                    predicted,
+                ))
+                .map(|s| s.mean)
+            });
             let observability = self.observability(&train);
             let runs: Vec<(usize, MethodRun)> = methods
                 .par_iter()
@@ -525,7 +542,8 @@ impl Shared<'_> {
         let fit_ms = self.fit_ms(started);
         let sets = &self.regions[job.region];
         let judged = fitted.and_then(|model| {
-            let judged = judge(model.as_ref(), &sets.test, &sets.truth, &self.world.robot)?;
+            let test = (&sets.test, &sets.test_poses[..]);
+            let judged = judge(model.as_ref(), test, &sets.truth, &self.world.robot)?;
             match judged.non_finite_view() {
                 Some(view) => Err(Error::Invalid(format!(
                     "the model's predictions on the {view} are not finite"

@@ -28,7 +28,7 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::eval::GroundTruth;
 use crate::eval::Stats;
-use crate::eval::judge::truth_errors;
+use crate::eval::judge::{truth_errors, truth_set_errors};
 use crate::measurements::as_dataset;
 use crate::rng::{Stream, derive};
 
@@ -481,7 +481,7 @@ impl PathContext<'_> {
 
 /// Statistics of `model`'s errors on the ground-truth grid.
 fn grid_stats(model: &dyn Fitted, truth: &GroundTruth) -> Option<Stats> {
-    Stats::of(&truth_errors(model, truth, &truth.grid.points).position)
+    Stats::of(&truth_set_errors(model, truth, &truth.grid).position)
 }
 
 /// The name suffix of a method fitted with the motion as inputs.

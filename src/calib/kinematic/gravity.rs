@@ -1,6 +1,6 @@
 //! Gravity torques on the nominal DH chain, for the elastic model's deflections.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
@@ -91,7 +91,12 @@ impl GravityModel {
     /// Gravity torques (Nm; N for a prismatic joint) at `q` of the nominal DH chain, as
     /// [`crate::robot::dynamics::gravity_torques`] gives them on the URDF chain.
     pub fn torques(&self, dh: &DhChain, q: &[f64]) -> Vec<f64> {
-        let frames = dh.frames(q);
+        self.torques_on(dh, &dh.frames(q))
+    }
+
+    /// [`GravityModel::torques`] on the DH frames of the configuration (`dh.frames(q)`, or a
+    /// [`ChainPose`](crate::robot::dh::ChainPose)'s).
+    pub fn torques_on(&self, dh: &DhChain, frames: &[Isometry3<f64>]) -> Vec<f64> {
         let n = dh.dof();
         let mut out = vec![0.0; n];
         gravity_pass(

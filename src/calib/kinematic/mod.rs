@@ -74,7 +74,7 @@ mod params;
 mod problem;
 mod solve;
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -87,11 +87,12 @@ use problem::Problem;
 pub use solve::Termination;
 
 use super::domain::Domain;
-use super::error_model::{ErrorFrames, FrameErrors};
+use super::error_model::{FrameErrors, flange_pose_with_errors, flange_pose_with_errors_on};
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::robot::dh::ChainPose;
 use crate::robot::plausible;
 
 /// The largest |compliance| (rad/Nm; m/N for a prismatic joint) a saved model may have. Real joints deflect
@@ -445,22 +446,47 @@ impl KinematicModel {
 
     /// The calibrated flange pose at commanded `q` (after the base error frame, where there is one).
     pub fn flange_pose(&self, q: &[f64]) -> Isometry3<f64> {
-        let qd: Vec<f64> = match (&self.gravity, &self.compliance) {
-            (Some(g), Some(c)) => g
-                .torques(&self.basis.dh, q)
-                .iter()
-                .zip(c)
-                .zip(q)
-                .map(|((t, c), q)| q + c * t)
-                .collect(),
-            _ => q.to_vec(),
+        let dh = &self.basis.dh;
+        // `ErrorFrames::new(..).flange`'s products, without its frames.
+        let flange = match (&self.gravity, &self.compliance) {
+            (Some(g), Some(c)) => {
+                flange_pose_with_errors(dh, &deflected(q, &g.torques(dh, q), c), &self.errors)
+            }
+            _ => flange_pose_with_errors(dh, q, &self.errors),
         };
-        let flange = ErrorFrames::new(&self.basis.dh, &qd, &self.errors).flange;
+        self.with_base_error(flange)
+    }
+
+    /// [`KinematicModel::flange_pose`] at a pose of the model's nominal chain, the same bits: its frames give
+    /// the gravity torques and, where no compliance deflects the joints, its links the chain with errors.
+    pub fn flange_pose_at(&self, pose: &ChainPose) -> Isometry3<f64> {
+        let dh = &self.basis.dh;
+        let flange = match (&self.gravity, &self.compliance) {
+            (Some(g), Some(c)) => {
+                let qd = deflected(&pose.q, &g.torques_on(dh, &pose.frames), c);
+                flange_pose_with_errors(dh, &qd, &self.errors)
+            }
+            _ => flange_pose_with_errors_on(dh, pose.links.iter().copied(), &self.errors),
+        };
+        self.with_base_error(flange)
+    }
+
+    fn with_base_error(&self, flange: Isometry3<f64>) -> Isometry3<f64> {
         match &self.base_error {
             Some(e0) => e0 * flange,
             None => flange,
         }
     }
+}
+
+/// The joint angles the gravity torques `torques` deflect `q` to through the compliances `c`.
+fn deflected(q: &[f64], torques: &[f64], c: &[f64]) -> Vec<f64> {
+    torques
+        .iter()
+        .zip(c)
+        .zip(q)
+        .map(|((t, c), q)| q + c * t)
+        .collect()
 }
 
 impl Fitted for KinematicModel {
@@ -480,6 +506,11 @@ impl Fitted for KinematicModel {
             linearized_position: position,
             orientation: f.rotation,
         }
+    }
+
+    fn point_at(&self, pose: &ChainPose, _inputs: &[f64]) -> (Point3<f64>, UnitQuaternion<f64>) {
+        let f = self.flange_pose_at(pose);
+        (f * self.basis.registration.frame.mounting, f.rotation)
     }
 
     fn models_orientation(&self) -> bool {
