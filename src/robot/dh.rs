@@ -300,6 +300,21 @@ impl DhChain {
         pose * self.tool
     }
 
+    /// [`DhChain::flange_pose`] with the rows' fixed rotations computed once ([`DhChain::fixed_rotations`]):
+    /// the same pose, bit for bit, without two of each link's three sine–cosine pairs.
+    pub fn flange_pose_fixed(&self, q: &[f64], fixed: &FixedRotations) -> Isometry3<f64> {
+        assert_eq!(
+            q.len(),
+            self.dof(),
+            "configuration length must equal the chain's dof"
+        );
+        let mut pose = self.base;
+        for (i, &qi) in q.iter().enumerate() {
+            pose *= self.link_transform_fixed(i, qi, fixed);
+        }
+        pose * self.tool
+    }
+
     /// The construction is exact by design; this catches what it cannot handle (overflowing common normals
     /// of nearly parallel axes) before a calibration silently uses a wrong model.
     fn agrees_with(&self, chain: &Chain) -> std::result::Result<(), String> {
@@ -467,6 +482,8 @@ mod tests {
                     dh.link_transform(i, q)
                 );
             }
+            let q: Vec<f64> = (0..dh.dof()).map(|_| rng.random_range(-3.0..3.0)).collect();
+            assert_eq!(dh.flange_pose_fixed(&q, &fixed), dh.flange_pose(&q));
         }
         assert_ne!(
             dh.link_transform(2, 0.4),
