@@ -443,22 +443,13 @@ mod tests {
                 vec![seen + noise]
             })
             .collect();
-        let data = Dataset {
-            origin: "moving".into(),
-            joint_names: (1..=7).map(|j| format!("j{j}")).collect(),
-            point_ids: (0..300).map(|k| k.to_string()).collect(),
-            q: time.iter().map(|&t| q(t)).collect(),
+        let mut data = Dataset::in_memory(
+            "moving",
+            (1..=7).map(|j| format!("j{j}")).collect(),
+            time.iter().map(|&t| q(t)).collect(),
             measured,
-            nominal_reflectors: None,
-            nominal_flange: None,
-            split: None,
-            regions: None,
-            measured_orientation: None,
-            extra_inputs: None,
-            time: Some(time),
-            rates: None,
-            base_frame: false,
-        };
+        );
+        data.time = Some(time);
         (dh, data)
     }
 

@@ -333,21 +333,21 @@ impl DhChain {
     }
 
     pub fn flange_pose(&self, q: &[f64]) -> Isometry3<f64> {
-        assert_eq!(
-            q.len(),
-            self.dof(),
-            "configuration length must equal the chain's dof"
-        );
-        let mut pose = self.base;
-        for (i, &qi) in q.iter().enumerate() {
-            pose *= self.link_transform(i, qi);
-        }
-        pose * self.tool
+        self.flange_through(q, |i, qi| self.link_transform(i, qi))
     }
 
     /// [`DhChain::flange_pose`] with the rows' fixed rotations computed once ([`DhChain::fixed_rotations`]):
     /// the same pose, bit for bit, without two of each link's three sine–cosine pairs.
     pub fn flange_pose_fixed(&self, q: &[f64], fixed: &FixedRotations) -> Isometry3<f64> {
+        self.flange_through(q, |i, qi| self.link_transform_fixed(i, qi, fixed))
+    }
+
+    /// The base, the links `link(i, q_i)` in order, the tool.
+    fn flange_through(
+        &self,
+        q: &[f64],
+        link: impl Fn(usize, f64) -> Isometry3<f64>,
+    ) -> Isometry3<f64> {
         assert_eq!(
             q.len(),
             self.dof(),
@@ -355,7 +355,7 @@ impl DhChain {
         );
         let mut pose = self.base;
         for (i, &qi) in q.iter().enumerate() {
-            pose *= self.link_transform_fixed(i, qi, fixed);
+            pose *= link(i, qi);
         }
         pose * self.tool
     }
