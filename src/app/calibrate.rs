@@ -389,15 +389,12 @@ fn judge_split(inputs: &Inputs, pair: &FittedPair, predicted: &TestPredicted) ->
         .registration()
         .observe(test)
         .map_err(|e| e.in_data(origin, "the test split"))?;
-    let nominal_obs = match pair.nominal.is_some() {
-        true => Some(
-            pair.nominal()
-                .registration()
-                .observe(test)
-                .map_err(|e| e.in_data(origin, "the test split"))?,
-        ),
-        false => None,
-    };
+    let nominal_obs = pair
+        .nominal
+        .is_some()
+        .then(|| pair.nominal().registration().observe(test))
+        .transpose()
+        .map_err(|e| e.in_data(origin, "the test split"))?;
     let errors = predicted.errors(&observed, nominal_obs.as_deref());
     let (nominal, registration) = (pair.nominal(), pair.nominal().registration());
     let iso = iso_cubes::cubes(
@@ -490,20 +487,19 @@ fn judge_truth(
     for (i, o) in obs_truth.iter_mut().enumerate() {
         o.inputs = test.extra_inputs_of(i).to_vec();
     }
-    let nominal_truth = match pair.nominal.is_some() {
-        true => {
-            let mut obs = pair
-                .nominal()
-                .registration()
-                .observe_points(&test.q, &t_test.in_tracker)?;
-            // The same inputs for the nominal model's (they do not move it: it has no regression), so its
-            // predictions of the test points serve here too.
-            for (o, m) in obs.iter_mut().zip(&obs_truth) {
-                o.inputs.clone_from(&m.inputs);
-            }
-            Some(obs)
+    let nominal_truth = if pair.nominal.is_some() {
+        let mut obs = pair
+            .nominal()
+            .registration()
+            .observe_points(&test.q, &t_test.in_tracker)?;
+        // The same inputs for the nominal model's (they do not move it: it has no regression), so its
+        // predictions of the test points serve here too.
+        for (o, m) in obs.iter_mut().zip(&obs_truth) {
+            o.inputs.clone_from(&m.inputs);
         }
-        false => None,
+        Some(obs)
+    } else {
+        None
     };
     let e = predicted.errors(&obs_truth, nominal_truth.as_deref());
     let summary = e.summary()?;

@@ -2,6 +2,8 @@
 //! calibrated prediction, and both errors (mm; with a 6-DoF probe, the orientations too). The model predicts
 //! each point once, for this file and for judging it on the test split and against the truth.
 
+use rayon::prelude::*;
+
 use crate::calib::method::Fitted;
 use crate::calib::tracker_frame::Observation;
 use crate::dataset::{Dataset, Split};
@@ -35,25 +37,13 @@ const ORIENTATION_COLUMNS: [&str; 6] = [
 ];
 
 /// `model`'s [`PointPrediction`] of every point of `data`, in order: made once, for `predictions.csv` and for
-/// judging the model on the test split and against the truth (the same configurations and inputs). The two
-/// halves are made on two cores; each point's prediction is the same computation either way.
+/// judging the model on the test split and against the truth (the same configurations and inputs). In parallel;
+/// each point's prediction is the same computation whatever the thread count.
 pub fn predict_all(model: &dyn Fitted, data: &Dataset) -> Vec<PointPrediction> {
-    let predict = |points: std::ops::Range<usize>| -> Vec<PointPrediction> {
-        points
-            .map(|i| PointPrediction::of(model, &data.q[i], data.extra_inputs_of(i)))
-            .collect()
-    };
-    let half = data.len() / 2;
-    std::thread::scope(|s| {
-        let second = s.spawn(|| predict(half..data.len()));
-        let mut all = predict(0..half);
-        all.extend(
-            second
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
-        );
-        all
-    })
+    (0..data.len())
+        .into_par_iter()
+        .map(|i| PointPrediction::of(model, &data.q[i], data.extra_inputs_of(i)))
+        .collect()
 }
 
 /// The file's bytes for `model` on every point of `data`, labelled by `labels`; `predicted`: the model's
