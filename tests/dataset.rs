@@ -306,8 +306,13 @@ fn truth_aligns_to_dataset_order() {
     let truth = Truth::from_reader(&truth_csv(c).unwrap()[..], "truth.csv").unwrap();
     let data = read(&measurements_text(), &c.joint_names).unwrap();
     let shuffled = data.subset(&[7, 3, 29, 0]);
-    let aligned = truth.aligned_to(&shuffled).unwrap();
+    let aligned = truth.clone().aligned_to(&shuffled).unwrap();
     assert_eq!(aligned.point_ids, ["7", "3", "29", "0"]);
+    // Already in the data's order: the same table.
+    let in_order = truth.clone().aligned_to(&data).unwrap();
+    assert_eq!(in_order.point_ids, truth.point_ids);
+    assert_eq!(in_order.in_base, truth.in_base);
+    assert_eq!(in_order.in_tracker, truth.in_tracker);
     for (k, &i) in [7, 3, 29, 0].iter().enumerate() {
         assert_eq!(aligned.in_base[k], c.points[i].true_reflectors);
         assert_eq!(aligned.in_tracker[k], c.points[i].true_in_tracker);
@@ -321,7 +326,7 @@ fn truth_aligns_to_dataset_order() {
     .unwrap();
     let j: Vec<String> = vec!["j".into()];
     let data = read("point_id,j,x1,y1,z1\nb,0,1,2,3\na,0,1,2,3\nc,0,1,2,3\n", &j).unwrap();
-    assert_message(partial.aligned_to(&data), &["no point_id 'c'"]);
+    assert_message(partial.clone().aligned_to(&data), &["no point_id 'c'"]);
     let two = data.subset(&[0, 1]);
     let aligned = partial.aligned_to(&two).unwrap();
     assert_eq!(aligned.point_ids, ["b", "a"]);

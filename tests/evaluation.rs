@@ -153,6 +153,18 @@ fn judging_through_the_truths_poses_gives_the_bits_of_predicting_at_each_configu
                 "{}",
                 model.method()
             );
+            // `calibrate`'s predictions: the nominal kinematics and the prediction from one pass.
+            let point = |p: &nalgebra::Point3<f64>| p.coords.map(f64::to_bits);
+            let ((np, nr), both) = model.nominal_and_prediction(q, &[]);
+            let (n, r) = model.nominal(q);
+            let name = model.method();
+            assert_eq!(point(&np), point(&n), "{name}");
+            assert_eq!(nr.coords.map(f64::to_bits), r.coords.map(f64::to_bits));
+            assert_eq!(point(&both.position), point(&p.position), "{name}");
+            let linearized = point(&p.linearized_position);
+            assert_eq!(point(&both.linearized_position), linearized, "{name}");
+            let orientation = p.orientation.coords.map(f64::to_bits);
+            assert_eq!(both.orientation.coords.map(f64::to_bits), orientation);
         }
     }
 }

@@ -260,6 +260,16 @@ pub trait Fitted: Any + Send + Sync {
         (f * self.registration().frame.mounting, f.rotation)
     }
 
+    /// [`Fitted::nominal`] and [`Fitted::predict_with`] at `q`, the same bits: a method whose prediction
+    /// passes over the nominal chain takes the nominal kinematics from that pass instead of a second one.
+    fn nominal_and_prediction(
+        &self,
+        q: &[f64],
+        inputs: &[f64],
+    ) -> ((Point3<f64>, UnitQuaternion<f64>), Prediction) {
+        (self.nominal(q), self.predict_with(q, inputs))
+    }
+
     /// Joint angles, from `seed`, at which this model puts the measured point at `target` (and the flange at
     /// `orientation` when the method models it), with the extra inputs `inputs` ([`Fitted::predict_with`]).
     /// Gauss–Newton on the nominal Jacobian: every model differs from the nominal one by a fraction of a

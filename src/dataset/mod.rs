@@ -408,10 +408,10 @@ impl CsvTable {
     /// `x, y, z, qw, qx, qy, qz`. A quaternion within 1e-9 of unit norm is kept as written (so a file
     /// read back gives the same numbers bit for bit), one within 1e-2 is normalised, others are refused.
     fn pose(&self, r: usize, cols: &[usize]) -> Result<Isometry3<f64>> {
-        let v = cols
-            .iter()
-            .map(|&c| self.number(r, c))
-            .collect::<Result<Vec<_>>>()?;
+        let mut v = [0.0; 7];
+        for (v, &c) in v.iter_mut().zip(cols) {
+            *v = self.number(r, c)?;
+        }
         let q = Quaternion::new(v[3], v[4], v[5], v[6]);
         let norm = q.norm();
         let rotation = if (norm - 1.0).abs() <= 1e-9 {
@@ -476,7 +476,7 @@ impl CsvTable {
         let Some(c) = self.column("point_id") else {
             return Ok((0..self.len()).map(|r| (r + 2).to_string()).collect());
         };
-        let mut seen: HashMap<&str, usize> = HashMap::new();
+        let mut seen: HashMap<&str, usize> = HashMap::with_capacity(self.len());
         let mut ids = Vec::with_capacity(self.len());
         for r in 0..self.len() {
             let id = self.cell(r, c);

@@ -29,15 +29,60 @@ pub(super) fn shown(cell: &str) -> String {
     }
 }
 
+/// The ASCII whitespace `str::trim` removes.
+fn space(b: &u8) -> bool {
+    matches!(b, b'\t' | b'\n' | b'\x0B' | b'\x0C' | b'\r' | b' ')
+}
+
 /// `cell` without the whitespace `str::trim` removes, for an ASCII cell.
 fn trim_ascii(cell: &[u8]) -> &[u8] {
-    let space = |b: &u8| matches!(b, b'\t' | b'\n' | b'\x0B' | b'\x0C' | b'\r' | b' ');
     let start = cell.iter().position(|b| !space(b)).unwrap_or(cell.len());
     let end = cell
         .iter()
         .rposition(|b| !space(b))
         .map_or(start, |e| e + 1);
     &cell[start..end]
+}
+
+/// Appends `record`'s cells, trimmed, to `text`, and where each ends to `bounds`; a cell that is not UTF-8 is
+/// an error carrying the record's index (the header's is 0).
+fn push_cells(
+    record: &csv::ByteRecord,
+    text: &mut Vec<u8>,
+    bounds: &mut Vec<usize>,
+) -> std::result::Result<(), u64> {
+    // An ASCII row (all of a campaign's) needs no UTF-8 check per cell.
+    let ascii = record.as_slice().is_ascii();
+    if ascii {
+        // Nothing to trim (a campaign's rows): the record's cells are already one after the other.
+        let (mut end, row_bounds) = (text.len(), bounds.len());
+        bounds.reserve(record.len());
+        for cell in record {
+            if cell.first().is_some_and(space) || cell.last().is_some_and(space) {
+                break;
+            }
+            end += cell.len();
+            bounds.push(end);
+        }
+        if bounds.len() == row_bounds + record.len() {
+            text.extend_from_slice(record.as_slice());
+            return Ok(());
+        }
+        bounds.truncate(row_bounds);
+    }
+    for cell in record {
+        let cell = if ascii {
+            trim_ascii(cell)
+        } else {
+            std::str::from_utf8(cell)
+                .map_err(|_| record.position().map_or(0, |p| p.record()))?
+                .trim()
+                .as_bytes()
+        };
+        text.extend_from_slice(cell);
+        bounds.push(text.len());
+    }
+    Ok(())
 }
 
 /// How much of a cell a message shows.
@@ -145,20 +190,7 @@ impl CsvTable {
         let mut record = csv::ByteRecord::new();
         while csv.read_byte_record(&mut record).map_err(csv_err)? {
             let (row_text, row_bounds) = (text.len(), bounds.len());
-            // An ASCII row (all of a campaign's) needs no UTF-8 check per cell.
-            let ascii = record.as_slice().is_ascii();
-            for cell in &record {
-                let cell = if ascii {
-                    trim_ascii(cell)
-                } else {
-                    std::str::from_utf8(cell)
-                        .map_err(|_| not_utf8(record.position().map_or(0, |p| p.record())))?
-                        .trim()
-                        .as_bytes()
-                };
-                text.extend_from_slice(cell);
-                bounds.push(text.len());
-            }
+            push_cells(&record, &mut text, &mut bounds).map_err(not_utf8)?;
             if dialect.mapped && text.len() == row_text {
                 bounds.truncate(row_bounds);
                 continue;
@@ -242,6 +274,7 @@ impl CsvTable {
         format!("row {}, column {}", r + 2, shown(&self.headers[c]))
     }
 
+    #[inline]
     pub(super) fn cell(&self, r: usize, c: usize) -> &str {
         let k = r * self.headers.len() + c;
         &self.text[self.bounds[k]..self.bounds[k + 1]]

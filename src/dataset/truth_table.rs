@@ -88,7 +88,7 @@ impl TruthTable {
 
     /// The rows reordered to match `dataset.point_ids`; error naming the first point_id missing from
     /// the truth file, or a reflector count that differs from the dataset's.
-    pub fn aligned_to(&self, dataset: &Dataset) -> Result<TruthTable> {
+    pub fn aligned_to(self, dataset: &Dataset) -> Result<TruthTable> {
         let err = |message: String| Error::Data {
             origin: self.origin.clone(),
             message,
@@ -101,6 +101,10 @@ impl TruthTable {
                 dataset.origin,
                 dataset.reflectors()
             )));
+        }
+        // A campaign's truth lists its points in the measurements' order: nothing to reorder or copy.
+        if self.point_ids == dataset.point_ids {
+            return Ok(self);
         }
         let index: HashMap<&str, usize> = self
             .point_ids

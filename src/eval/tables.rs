@@ -40,10 +40,8 @@ pub struct PointPrediction {
 impl PointPrediction {
     /// `model` at `q` with the extra inputs `inputs`.
     pub fn of(model: &dyn Fitted, q: &[f64], inputs: &[f64]) -> PointPrediction {
-        PointPrediction {
-            nominal: model.nominal(q),
-            predicted: model.predict_with(q, inputs),
-        }
+        let (nominal, predicted) = model.nominal_and_prediction(q, inputs);
+        PointPrediction { nominal, predicted }
     }
 }
 

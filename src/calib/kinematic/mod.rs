@@ -513,6 +513,25 @@ impl Fitted for KinematicModel {
         (f * self.basis.registration.frame.mounting, f.rotation)
     }
 
+    /// One pass over the nominal chain: its flange is the nominal kinematics (`DhChain::flange_pose`'s
+    /// products), its links and frames give the prediction ([`KinematicModel::flange_pose_at`]).
+    fn nominal_and_prediction(
+        &self,
+        q: &[f64],
+        _inputs: &[f64],
+    ) -> ((Point3<f64>, UnitQuaternion<f64>), Prediction) {
+        let pose = self.basis.dh.pose(q);
+        let f = pose.flange(&self.basis.dh);
+        let mounting = self.basis.registration.frame.mounting;
+        let (position, orientation) = self.point_at(&pose, &[]);
+        let prediction = Prediction {
+            position,
+            linearized_position: position,
+            orientation,
+        };
+        ((f * mounting, f.rotation), prediction)
+    }
+
     fn models_orientation(&self) -> bool {
         self.basis.registration.measures_orientation()
     }
