@@ -115,6 +115,16 @@ fn toward(models: &[ComponentModel], v: Vector3<f64>, weight: f64) -> Vector3<f6
     c + (v - c) * weight
 }
 
+/// `reference` moved by the position offset `dp` and turned by the rotation vector `dw`.
+fn corrected(reference: &Reference, dp: Vector3<f64>, dw: Option<Vector3<f64>>) -> Reference {
+    // A zero rotation leaves the reference's bits alone, as a zero offset does.
+    let orientation = match dw {
+        Some(w) if w != Vector3::zeros() => UnitQuaternion::from_scaled_axis(w) * reference.1,
+        _ => reference.1,
+    };
+    (reference.0 + dp, orientation)
+}
+
 pub(super) fn mean(values: impl Iterator<Item = f64>) -> f64 {
     let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
     if n == 0 { 0.0 } else { sum / n as f64 }
@@ -177,30 +187,35 @@ impl ResidualSetup {
     }
 }
 
-impl ResidualSetup {
-    /// The position offset of `correction` (fitted on this setup) at every training point, then every
-    /// validation point: [`ResidualCorrection::correction`]'s, bit for bit, from the search's feature columns
-    /// ([`Candidates::fitted`]); `None` where those cannot say.
-    pub(super) fn positions(&self, correction: &ResidualCorrection) -> Option<Vec<Vector3<f64>>> {
-        let fitted: Vec<(Vec<f64>, Vec<f64>)> = correction
-            .position
-            .iter()
-            .map(|m| self.regression.fitted(&m.model))
-            .collect::<Option<_>>()?;
-        let [x, y, z] = fitted.as_slice() else {
-            return None;
-        };
-        let rows = |a: &[f64], b: &[f64], c: &[f64]| -> Vec<Vector3<f64>> {
-            a.iter()
-                .zip(b)
-                .zip(c)
-                .map(|((&a, &b), &c)| Vector3::new(a, b, c))
-                .collect()
-        };
-        let mut all = rows(&x.0, &y.0, &z.0);
-        all.extend(rows(&x.1, &y.1, &z.1));
-        Some(all)
+/// One component's modelled values, [`RidgeModel::predict`]'s bits: at the training points where the search's
+/// feature columns say them ([`Candidates::fitted`]), and at the validation points.
+struct Values {
+    train: Option<Vec<f64>>,
+    val: Vec<f64>,
+}
+
+impl Values {
+    /// Those of a zero model: `predict` gives +0.0 everywhere.
+    fn zero(&mut self) {
+        if let Some(t) = &mut self.train {
+            t.fill(0.0);
+        }
+        self.val.fill(0.0);
     }
+
+    /// The values at the training points (none where the search's columns do not say them).
+    fn at_train(&self) -> &[f64] {
+        self.train.as_deref().unwrap_or_default()
+    }
+
+    fn at_val(&self) -> &[f64] {
+        &self.val
+    }
+}
+
+/// The vectors of a group's three components at row `i` of `side`.
+fn vector_at(group: &[Values], side: fn(&Values) -> &[f64], i: usize) -> Vector3<f64> {
+    Vector3::new(side(&group[0])[i], side(&group[1])[i], side(&group[2])[i])
 }
 
 impl ResidualCorrection {
@@ -219,24 +234,27 @@ impl ResidualCorrection {
         let mut setup = ResidualSetup::new(joint_names, extra_inputs, train, val)?;
         let refs_train: Vec<Reference> = train.iter().map(|o| reference(&o.q)).collect();
         let refs_val: Vec<Reference> = val.iter().map(|o| reference(&o.q)).collect();
-        ResidualCorrection::fit_prepared(
+        Ok(ResidualCorrection::fit_prepared(
             &mut setup,
             (train, &refs_train),
             (val, &refs_val),
             orientation,
             opts,
-        )
+        )?
+        .0)
     }
 
     /// [`ResidualCorrection::fit`] on a setup of the same observations' rows, with the reference predictions
-    /// of the training and validation observations given.
+    /// of the training and validation observations given; with it the modelled position offset at every
+    /// training point, then every validation point ([`ResidualCorrection::correction`]'s bits), where the
+    /// search's feature columns say them.
     pub(super) fn fit_prepared(
         setup: &mut ResidualSetup,
         (train, refs_train): (&[Observation], &[Reference]),
         (val, refs_val): (&[Observation], &[Reference]),
         orientation: bool,
         opts: &RegressionOptions,
-    ) -> Result<ResidualCorrection> {
+    ) -> Result<(ResidualCorrection, Option<Vec<Vector3<f64>>>)> {
         let res = |obs: &[Observation], refs: &[Reference]| -> Vec<_> {
             obs.iter()
                 .zip(refs)
@@ -250,23 +268,41 @@ impl ResidualCorrection {
         let regression = &mut setup.regression;
         let mut regress = |names: [&str; 3],
                            component: &dyn Fn(&Residual) -> Vector3<f64>|
-         -> Result<Vec<ComponentModel>> {
+         -> Result<(Vec<ComponentModel>, Vec<Values>)> {
             let matrix =
                 |rows: &[Residual]| DMatrix::from_fn(rows.len(), 3, |r, c| component(&rows[r])[c]);
             let y_val = matrix(&res_val);
             let models = regression.fit(&matrix(&res_train), &y_val, opts)?;
+            let regression = &*regression;
             Ok(names
                 .iter()
                 .zip(models)
                 .enumerate()
                 .map(|(k, (name, model))| {
+                    // `predict` at the validation rows, from the search's feature columns where they say it.
+                    let mut values = match regression.fitted(&model) {
+                        Some((train, val)) => Values {
+                            train: Some(train),
+                            val,
+                        },
+                        None => Values {
+                            train: None,
+                            val: x_val_rows.iter().map(|x| model.predict(x)).collect(),
+                        },
+                    };
                     // No worse than no correction, in the validation sum of squares.
                     let y: Vec<f64> = y_val.column(k).iter().copied().collect();
-                    let fitted: Vec<f64> = x_val_rows.iter().map(|x| model.predict(x)).collect();
-                    let sse_model: f64 = y.iter().zip(&fitted).map(|(a, b)| (a - b).powi(2)).sum();
+                    let sse_model: f64 = y
+                        .iter()
+                        .zip(&values.val)
+                        .map(|(a, b)| (a - b).powi(2))
+                        .sum();
                     let sse_zero: f64 = y.iter().map(|a| a * a).sum();
                     let kept = sse_model < sse_zero;
-                    ComponentModel {
+                    if !kept {
+                        values.zero();
+                    }
+                    let model = ComponentModel {
                         name: name.to_string(),
                         kept,
                         model: if kept {
@@ -274,15 +310,16 @@ impl ResidualCorrection {
                         } else {
                             zero_model(r2(&y, &vec![0.0; y.len()]))
                         },
-                    }
+                    };
+                    (model, values)
                 })
-                .collect())
+                .unzip())
         };
-        let position = regress(POSITION_NAMES, &|r| r.0)?;
-        let orientation = if with_orientation {
+        let (position, mut position_values) = regress(POSITION_NAMES, &|r| r.0)?;
+        let (orientation, mut orientation_values) = if with_orientation {
             regress(ORIENTATION_NAMES, &|r| r.1.unwrap_or_default())?
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
         let mut correction = ResidualCorrection {
             candidates: setup.candidates.clone(),
@@ -290,17 +327,34 @@ impl ResidualCorrection {
             position,
             orientation,
         };
-        correction.prune(val, refs_val);
-        Ok(correction)
+        correction.prune(val, refs_val, &mut position_values, &mut orientation_values);
+        let offsets = position_values.iter().all(|v| v.train.is_some()).then(|| {
+            (0..train.len())
+                .map(|i| vector_at(&position_values, Values::at_train, i))
+                .chain((0..val.len()).map(|i| vector_at(&position_values, Values::at_val, i)))
+                .collect()
+        });
+        Ok((correction, offsets))
     }
 
-    /// Drops a group whose mean validation error (distance, angle) would grow, evaluated exactly as
-    /// predictions are made.
-    fn prune(&mut self, val: &[Observation], refs: &[Reference]) {
-        let corrected: Vec<Reference> = val
+    /// Drops a group whose mean validation error (distance, angle) would grow, evaluated as predictions are
+    /// made ([`corrected`]) from the components' values at the validation points (`position`, `orientation`:
+    /// `predict`'s bits; zeroed with their group).
+    fn prune(
+        &mut self,
+        val: &[Observation],
+        refs: &[Reference],
+        position: &mut [Values],
+        orientation: &mut [Values],
+    ) {
+        let at = |group: &[Values], i: usize| vector_at(group, Values::at_val, i);
+        let corrected: Vec<Reference> = refs
             .iter()
-            .zip(refs)
-            .map(|(o, r)| self.apply(&o.q, &o.inputs, r))
+            .enumerate()
+            .map(|(i, r)| {
+                let dw = (!self.orientation.is_empty()).then(|| at(orientation, i));
+                corrected(r, at(position, i), dw)
+            })
             .collect();
         let distance =
             |rs: &[Reference]| mean(val.iter().zip(rs).map(|(o, r)| (o.position - r.0).norm()));
@@ -319,6 +373,7 @@ impl ResidualCorrection {
         if distance(&corrected) > distance(refs) {
             let ys = residuals.iter().map(|r| r.0).collect::<Vec<_>>();
             zero_group(&mut self.position, &ys);
+            position.iter_mut().for_each(Values::zero);
         }
         if !self.orientation.is_empty() && angle(&corrected) > angle(refs) {
             let ys = residuals
@@ -326,6 +381,7 @@ impl ResidualCorrection {
                 .map(|r| r.1.unwrap_or_default())
                 .collect::<Vec<_>>();
             zero_group(&mut self.orientation, &ys);
+            orientation.iter_mut().for_each(Values::zero);
         }
     }
 
@@ -424,12 +480,7 @@ impl ResidualCorrection {
         let (dp, dw) = self.correction(q, inputs);
         let dp = self.weighted_position(dp, weight);
         let dw = dw.map(|w| toward(&self.orientation, w, weight));
-        // A zero rotation leaves the reference's bits alone, as a zero offset does.
-        let orientation = match dw {
-            Some(w) if w != Vector3::zeros() => UnitQuaternion::from_scaled_axis(w) * reference.1,
-            _ => reference.1,
-        };
-        ((reference.0 + dp, orientation), dp)
+        (corrected(reference, dp, dw), dp)
     }
 
     /// The modelled position offset `dp` at a point of weight `weight` ([`toward`]).

@@ -179,52 +179,40 @@ impl ResidualModel {
         // The rounds refit on the same points: their candidate rows, domain and nominal flange poses are the
         // same every round; only the registration moves.
         let domain = Domain::of(train, val);
-        let mut setup: Option<ResidualSetup> = None;
-        let mut best: Option<(f64, ResidualModel)> = None;
+        let (mut obs_train, mut obs_val) =
+            (registration.observe(train)?, registration.observe(val)?);
+        let mut setup =
+            ResidualSetup::new(&train.joint_names, &extra_inputs, &obs_train, &obs_val)?;
+        let mut best: Option<(f64, Registration, ResidualCorrection)> = None;
         let mut stalled = 0;
         for _ in 0..REGISTRATION_ROUNDS {
-            let (obs_train, obs_val) = (registration.observe(train)?, registration.observe(val)?);
-            let setup = match &mut setup {
-                Some(s) => s,
-                None => setup.insert(ResidualSetup::new(
-                    &train.joint_names,
-                    &extra_inputs,
-                    &obs_train,
-                    &obs_val,
-                )?),
-            };
             // `nominal_reference` of each point, from its flange pose computed once.
             let refs: Vec<Reference> = flanges
                 .iter()
                 .map(|f| (f * registration.frame.mounting, f.rotation))
                 .collect();
             let (refs_train, refs_val) = refs.split_at(train.len());
-            let residual = ResidualCorrection::fit_prepared(
-                setup,
+            let (residual, offsets) = ResidualCorrection::fit_prepared(
+                &mut setup,
                 (&obs_train, refs_train),
                 (&obs_val, refs_val),
                 registration.measures_orientation(),
                 &ctx.regression,
             )?;
-            let model = ResidualModel {
-                basis: Basis {
-                    joint_names: train.joint_names.clone(),
-                    dh: ctx.dh.clone(),
-                    registration: registration.clone(),
-                    domain: domain.clone(),
-                },
-                residual,
-            };
             // The modelled offset at every training and validation point, from the search's feature
             // columns (the same bits as `correction` there) where they can say.
-            let offsets: Vec<Vector3<f64>> =
-                setup.positions(&model.residual).unwrap_or_else(|| {
-                    q.iter()
-                        .zip(&inputs)
-                        .map(|(q, x)| model.residual.correction(q, x).0)
-                        .collect()
-                });
-            let error = validation_error(&model, &obs_val, refs_val, &offsets[train.len()..]);
+            let offsets: Vec<Vector3<f64>> = offsets.unwrap_or_else(|| {
+                q.iter()
+                    .zip(&inputs)
+                    .map(|(q, x)| residual.correction(q, x).0)
+                    .collect()
+            });
+            let error = validation_error(
+                (&domain, &residual),
+                &obs_val,
+                refs_val,
+                &offsets[train.len()..],
+            );
             // Register again onto the nominal points plus this round's modelled residual.
             let shifted: Vec<Isometry3<f64>> = flanges
                 .iter()
@@ -232,11 +220,11 @@ impl ResidualModel {
                 .map(|(f, dp)| Translation3::from(*dp) * f)
                 .collect();
             match &best {
-                Some((b, _)) if error >= b * (1.0 - ROUND_GAIN) => stalled += 1,
+                Some((b, ..)) if error >= b * (1.0 - ROUND_GAIN) => stalled += 1,
                 _ => stalled = 0,
             }
-            if best.as_ref().is_none_or(|(b, _)| error < *b) {
-                best = Some((error, model));
+            if best.as_ref().is_none_or(|(b, ..)| error < *b) {
+                best = Some((error, registration.clone(), residual));
             }
             if stalled >= STALLED_ROUNDS {
                 break;
@@ -250,8 +238,19 @@ impl ResidualModel {
                 registration.probe_rotation =
                     Some(probe_rotation(&registration.frame, &flanges, measured)?);
             }
+            registration.observe_again(train, &mut obs_train)?;
+            registration.observe_again(val, &mut obs_val)?;
         }
-        Ok(best.expect("at least one round").1)
+        let (_, registration, residual) = best.expect("at least one round");
+        Ok(ResidualModel {
+            basis: Basis {
+                joint_names: train.joint_names.clone(),
+                dh: ctx.dh.clone(),
+                registration,
+                domain,
+            },
+            residual,
+        })
     }
 
     /// A model read from a file can predict: a valid basis ([`Basis::validate`]) and a valid correction
@@ -272,17 +271,17 @@ impl ResidualModel {
     }
 }
 
-/// `predict_with`'s mean position error on the validation points, with their references and modelled offsets
-/// given.
+/// `predict_with`'s mean position error on the validation points of a model with `domain` and `residual`, with
+/// their references and modelled offsets given.
 fn validation_error(
-    model: &ResidualModel,
+    (domain, residual): (&Domain, &ResidualCorrection),
     val: &[Observation],
     refs: &[Reference],
     offsets: &[Vector3<f64>],
 ) -> f64 {
     mean(val.iter().zip(refs).zip(offsets).map(|((o, r), dp)| {
-        let w = model.basis.domain.weight(&o.q, &o.inputs);
-        (o.position - (r.0 + model.residual.weighted_position(*dp, w))).norm()
+        let w = domain.weight(&o.q, &o.inputs);
+        (o.position - (r.0 + residual.weighted_position(*dp, w))).norm()
     }))
 }
 

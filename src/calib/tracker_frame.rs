@@ -19,7 +19,7 @@ use nalgebra::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::reduced::{Small, Tall};
+use super::reduced::{Small, Tall, gram_rows};
 use super::rigid::{centre, register_points};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -176,15 +176,38 @@ impl Registration {
     /// The dataset's points as observations: positions, orientations (nest or probe) and extra inputs.
     pub fn observe(&self, data: &Dataset) -> Result<Vec<Observation>> {
         let mut obs = self.observe_points(&data.q, &data.measured)?;
+        self.orient_by_probe(data, &mut obs);
+        for (i, o) in obs.iter_mut().enumerate() {
+            o.inputs = data.extra_inputs_of(i).to_vec();
+        }
+        Ok(obs)
+    }
+
+    /// [`Registration::observe`] of `data` into `obs`, its observations by another registration: the positions
+    /// and orientations become this one's, the joint angles and inputs (which no registration changes) stay.
+    /// `residual-ridge` registers again every round.
+    pub(super) fn observe_again(&self, data: &Dataset, obs: &mut [Observation]) -> Result<()> {
+        if obs.len() != data.len() {
+            return Err(Error::Invalid(format!(
+                "registration: {} observations of {} points",
+                obs.len(),
+                data.len()
+            )));
+        }
+        for (o, points) in obs.iter_mut().zip(&data.measured) {
+            (o.position, o.orientation) = self.measure(points)?;
+        }
+        self.orient_by_probe(data, obs);
+        Ok(())
+    }
+
+    /// A 6-DoF probe's measured orientations into `obs` (observations of `data`).
+    fn orient_by_probe(&self, data: &Dataset, obs: &mut [Observation]) {
         if let (Some(probe), Some(measured)) = (self.probe_rotation, &data.measured_orientation) {
             for (o, m) in obs.iter_mut().zip(measured) {
                 o.orientation = Some(self.flange_orientation(m, &probe));
             }
         }
-        for (i, o) in obs.iter_mut().enumerate() {
-            o.inputs = data.extra_inputs_of(i).to_vec();
-        }
-        Ok(obs)
     }
 
     /// The flange orientation (base frame) that a probe orientation measured in the tracker frame implies.
@@ -205,24 +228,33 @@ impl Registration {
         q.iter()
             .zip(measured)
             .map(|(q, points)| {
-                let orientation = match &self.nest {
-                    Some(nest) if points.len() == nest.len() => {
-                        let c = centre(points);
-                        let local: Vec<Point3<f64>> =
-                            points.iter().map(|p| Point3::from(p - c)).collect();
-                        let fit = register_points(nest, &local)?;
-                        Some(self.frame.tracker_to_base.rotation * fit.transform.rotation)
-                    }
-                    _ => None,
-                };
+                let (position, orientation) = self.measure(points)?;
                 Ok(Observation {
                     q: q.clone(),
-                    position: self.frame.to_base(&centre(points)),
+                    position,
                     orientation,
                     inputs: Vec::new(),
                 })
             })
             .collect()
+    }
+
+    /// The base-frame position of one point's measurements (tracker frame, per reflector) and, with a nest,
+    /// the flange orientation they measure.
+    fn measure(
+        &self,
+        points: &[Point3<f64>],
+    ) -> Result<(Point3<f64>, Option<UnitQuaternion<f64>>)> {
+        let orientation = match &self.nest {
+            Some(nest) if points.len() == nest.len() => {
+                let c = centre(points);
+                let local: Vec<Point3<f64>> = points.iter().map(|p| Point3::from(p - c)).collect();
+                let fit = register_points(nest, &local)?;
+                Some(self.frame.tracker_to_base.rotation * fit.transform.rotation)
+            }
+            _ => None,
+        };
+        Ok((self.frame.to_base(&centre(points)), orientation))
     }
 }
 
@@ -512,6 +544,11 @@ impl Tall for RegistrationProblem<'_> {
             j.fixed_view_mut::<3, 3>(3 * i, 0)
                 .copy_from(&(-v.cross_matrix()));
         }
+    }
+
+    /// Only the rotation's columns move (`jacobian_into`): the products of the others are kept.
+    fn gram_into(&self, j: &DMatrix<f64>, g: &mut DMatrix<f64>) {
+        gram_rows(j, 3, g);
     }
 }
 
