@@ -113,30 +113,49 @@ impl Registration {
     /// Registers on the training and validation points together (everything a method may fit on; the test
     /// split stays untouched). The mounting guess comes from the `nom_*` columns when the data has them.
     pub fn fit(dh: &DhChain, train: &Dataset, val: &Dataset) -> Result<Registration> {
-        let q: Vec<&Vec<f64>> = train.q.iter().chain(&val.q).collect();
+        let fixed = dh.fixed_rotations();
+        let flanges: Vec<Isometry3<f64>> = train
+            .q
+            .iter()
+            .chain(&val.q)
+            .map(|q| dh.flange_pose_fixed(q, &fixed))
+            .collect();
+        Registration::fit_at(dh, train, val, &flanges)
+    }
+
+    /// [`Registration::fit`] with the nominal flange poses of the training, then the validation configurations
+    /// given (a method that computes the chain's frames anyway passes them on).
+    pub fn fit_at(
+        dh: &DhChain,
+        train: &Dataset,
+        val: &Dataset,
+        flanges: &[Isometry3<f64>],
+    ) -> Result<Registration> {
+        assert_eq!(
+            flanges.len(),
+            train.len() + val.len(),
+            "one flange pose per training and validation point"
+        );
         let centres: Vec<Point3<f64>> = train
             .measured
             .iter()
             .chain(&val.measured)
             .map(|m| centre(m))
             .collect();
-        let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| dh.flange_pose(q)).collect();
         let guess = match &train.nominal_reflectors {
-            Some(nom) if !train.is_empty() => {
-                dh.flange_pose(&train.q[0]).inverse() * centre(&nom[0])
-            }
+            Some(nom) if !train.is_empty() => flanges[0].inverse() * centre(&nom[0]),
             _ => Point3::origin(),
         };
         let base_frame = train.base_frame || val.base_frame;
         let frame = if base_frame {
-            fit_mounting(&centres, &flanges)?
+            fit_mounting(&centres, flanges)?
         } else {
-            fit_tracker_frame(&centres, &flanges, &guess)?
+            fit_tracker_frame(&centres, flanges, &guess)?
         };
         let probe_rotation = match (&train.measured_orientation, &val.measured_orientation) {
             (Some(a), Some(b)) => Some(probe_rotation(
                 &frame,
-                &flanges,
+                flanges,
                 &a.iter().chain(b).copied().collect::<Vec<_>>(),
             )?),
             (None, None) => None,

@@ -291,6 +291,21 @@ impl DhChain {
 
     /// World pose of DH frames 0..=n (n+1 entries) for q.
     pub fn frames(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
+        self.frames_through(q, |i, qi| self.link_transform(i, qi))
+    }
+
+    /// [`DhChain::frames`] with the rows' fixed rotations computed once ([`DhChain::fixed_rotations`]): the same
+    /// frames, bit for bit, without two of each link's three sine–cosine pairs.
+    pub fn frames_fixed(&self, q: &[f64], fixed: &FixedRotations) -> Vec<Isometry3<f64>> {
+        self.frames_through(q, |i, qi| self.link_transform_fixed(i, qi, fixed))
+    }
+
+    /// The base, then the base times the links `link(i, q_i)` one by one.
+    fn frames_through(
+        &self,
+        q: &[f64],
+        link: impl Fn(usize, f64) -> Isometry3<f64>,
+    ) -> Vec<Isometry3<f64>> {
         assert_eq!(
             q.len(),
             self.dof(),
@@ -300,7 +315,7 @@ impl DhChain {
         let mut pose = self.base;
         out.push(pose);
         for (i, &qi) in q.iter().enumerate() {
-            pose *= self.link_transform(i, qi);
+            pose *= link(i, qi);
             out.push(pose);
         }
         out
@@ -529,6 +544,7 @@ mod tests {
             }
             let q: Vec<f64> = (0..dh.dof()).map(|_| rng.random_range(-3.0..3.0)).collect();
             assert_eq!(dh.flange_pose_fixed(&q, &fixed), dh.flange_pose(&q));
+            assert_eq!(dh.frames_fixed(&q, &fixed), dh.frames(&q));
         }
         assert_ne!(
             dh.link_transform(2, 0.4),

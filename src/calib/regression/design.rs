@@ -369,27 +369,41 @@ type Factor = Cholesky<f64, Dyn>;
 /// latest fit did not use are dropped, so it holds at most one fit's worth.
 #[derive(Default)]
 pub(super) struct Factors {
-    /// By feature columns and α's bits: the factor and the fit that last used it.
-    map: HashMap<(Vec<usize>, u64), (Option<Factor>, u64)>,
+    /// By feature columns.
+    map: HashMap<Vec<usize>, Kept>,
     fit: u64,
 }
 
+/// One block's factors: the α grid's bits, the factor at each α, and the fit that last used them.
+type Kept = (Vec<u64>, Vec<Option<Factor>>, u64);
+
 impl Factors {
-    /// The factor of `block` (on features `idx`) at `alpha`, computed on first use.
-    pub(super) fn get(&mut self, block: &Block, idx: &[usize], alpha: f64) -> Option<&Factor> {
+    /// The factors of `block` (on features `idx`) at each of `alphas`, computed on first use: one look-up per
+    /// block, not per α.
+    pub(super) fn get(
+        &mut self,
+        block: &Block,
+        idx: &[usize],
+        alphas: &[f64],
+    ) -> &[Option<Factor>] {
         let fit = self.fit;
+        let bits: Vec<u64> = alphas.iter().map(|a| a.to_bits()).collect();
         let entry = self
             .map
-            .entry((idx.to_vec(), alpha.to_bits()))
-            .or_insert_with(|| (block.factor(alpha), fit));
-        entry.1 = fit;
-        entry.0.as_ref()
+            .entry(idx.to_vec())
+            .or_insert_with(|| (Vec::new(), Vec::new(), fit));
+        if entry.0 != bits {
+            entry.1 = alphas.iter().map(|&a| block.factor(a)).collect();
+            entry.0 = bits;
+        }
+        entry.2 = fit;
+        &entry.1
     }
 
     /// Ends a fit: drops what it did not use.
     pub(super) fn finish_fit(&mut self) {
         let fit = self.fit;
-        self.map.retain(|_, (_, used)| *used == fit);
+        self.map.retain(|_, (_, _, used)| *used == fit);
         self.fit += 1;
     }
 }

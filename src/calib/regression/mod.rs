@@ -317,7 +317,11 @@ fn fit_structures(
         };
         // α descending, strict improvement: equal scores keep the stronger penalty.
         let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
-        for &alpha in alphas {
+        let kept = match (nested, factors.as_deref_mut()) {
+            (true, Some(f)) => Some(f.get(&blocks[0], largest, alphas)),
+            _ => None,
+        };
+        for (a, &alpha) in alphas.iter().enumerate() {
             // A solution is copied out only where it beats the best so far.
             let mut keep = |k: usize, w: DVectorView<f64>, sse: f64| {
                 let b = &mut best[k];
@@ -327,8 +331,8 @@ fn fit_structures(
             };
             if nested {
                 let own;
-                let factor = match factors.as_deref_mut() {
-                    Some(f) => f.get(&blocks[0], largest, alpha),
+                let factor = match kept {
+                    Some(kept) => kept[a].as_ref(),
                     None => {
                         own = blocks[0].factor(alpha);
                         own.as_ref()

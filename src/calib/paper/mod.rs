@@ -10,7 +10,9 @@
 //! 4. Predict: the modelled `E_i` go into the full kinematics (eq. 6); position from the position parameters,
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix3xX, Point3, UnitQuaternion, Vector3};
+mod eq13;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -24,13 +26,9 @@ use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
 use super::tracker_frame::{Observation, Registration};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::numeric;
 use crate::robot::dh::ChainPose;
 use crate::robot::plausible;
-
-/// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
-/// paper's indistinguishable parameters (eq. 14–16, 22) make `J_e` rank-deficient by construction.
-const PINV_REL_EPS: f64 = 1e-10;
+use eq13::min_norm;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ParameterModel {
@@ -238,10 +236,21 @@ impl PaperModel {
         train: &Dataset,
         val: &Dataset,
     ) -> Result<PaperModel> {
-        let mut model = PaperModel::registered(kind, ctx, train, val)?;
         let Some(kind) = kind else {
-            return Ok(model);
+            return PaperModel::registered(None, ctx, train, val, None);
         };
+        // One pass over the chain per point gives the registration its flange poses, eq. 13 its Jacobians'
+        // frames and the regression its nominal TCP positions.
+        let dh = ctx.dh;
+        let fixed = dh.fixed_rotations();
+        let frames: Vec<Vec<Isometry3<f64>>> = train
+            .q
+            .iter()
+            .chain(&val.q)
+            .map(|q| dh.frames_fixed(q, &fixed))
+            .collect();
+        let flanges: Vec<Isometry3<f64>> = frames.iter().map(|f| f[dh.dof()] * dh.tool).collect();
+        let mut model = PaperModel::registered(Some(kind), ctx, train, val, Some(&flanges))?;
         let (lower, upper) = ctx.limits();
         let selection = select_params(ctx.dh, &lower, &upper, kind);
         check_identifiable(kind, train.len(), selection.position.len())?;
@@ -254,13 +263,25 @@ impl PaperModel {
             model.basis.registration.observe(train)?,
             model.basis.registration.observe(val)?,
         );
-        let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
-        let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
+        let (frames_train, frames_val) = frames.split_at(train.len());
+        let (flanges_train, flanges_val) = flanges.split_at(train.len());
+        let id_train = model.identify_at(
+            &obs_train,
+            frames_train,
+            &selection.position,
+            &orientation_params,
+        );
+        let id_val = model.identify_at(
+            &obs_val,
+            frames_val,
+            &selection.position,
+            &orientation_params,
+        );
         // Position and orientation parameters regress on the same candidates, and parameters with the same
         // ranking of the candidates on the same structures.
         let mut candidates = Candidates::new(
-            model.candidate_matrix(&obs_train),
-            model.candidate_matrix(&obs_val),
+            model.candidate_matrix(&obs_train, flanges_train),
+            model.candidate_matrix(&obs_val, flanges_val),
         )
         .keeping_factors();
         let mut regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
@@ -276,12 +297,14 @@ impl PaperModel {
     }
 
     /// The `nominal` model: the registered tracker frame and mounting, the candidates of the regressions and
-    /// the extra inputs' defaults, with no parameter model yet.
+    /// the extra inputs' defaults, with no parameter model yet. `flanges`: the nominal flange poses of the
+    /// training, then the validation points, where the caller has them.
     fn registered(
         kind: Option<ErrorModelKind>,
         ctx: &FitContext,
         train: &Dataset,
         val: &Dataset,
+        flanges: Option<&[Isometry3<f64>]>,
     ) -> Result<PaperModel> {
         if train.is_empty() || val.is_empty() {
             return Err(Error::Invalid(format!(
@@ -291,7 +314,10 @@ impl PaperModel {
             )));
         }
         let dh = ctx.dh;
-        let registration = Registration::fit(dh, train, val)?;
+        let registration = match flanges {
+            Some(flanges) => Registration::fit_at(dh, train, val, flanges)?,
+            None => Registration::fit(dh, train, val)?,
+        };
         let extra_inputs = train.extra_input_names().to_vec();
         if val.extra_input_names() != extra_inputs.as_slice() {
             return Err(Error::Invalid(format!(
@@ -332,19 +358,34 @@ impl PaperModel {
         position_params: &[ErrorParam],
         orientation_params: &[ErrorParam],
     ) -> Identified {
+        let dh = &self.basis.dh;
+        let fixed = dh.fixed_rotations();
+        let frames: Vec<Vec<Isometry3<f64>>> = observations
+            .iter()
+            .map(|o| dh.frames_fixed(&o.q, &fixed))
+            .collect();
+        self.identify_at(observations, &frames, position_params, orientation_params)
+    }
+
+    /// [`PaperModel::identify`] with each observation's frames of the nominal chain ([`DhChain::frames`]) given.
+    fn identify_at(
+        &self,
+        observations: &[Observation],
+        frames: &[Vec<Isometry3<f64>>],
+        position_params: &[ErrorParam],
+        orientation_params: &[ErrorParam],
+    ) -> Identified {
         let mut id = Identified {
             position: Vec::with_capacity(observations.len()),
             orientation: Vec::with_capacity(observations.len()),
         };
         let dh = &self.basis.dh;
-        for o in observations {
-            // One pass over the chain for the flange pose and the Jacobians' frames.
-            let frames = dh.frames(&o.q);
+        for (o, frames) in observations.iter().zip(frames) {
             let flange = frames[dh.dof()] * dh.tool;
             if !position_params.is_empty() {
                 let j = error_jacobian_on(
                     dh,
-                    &frames,
+                    frames,
                     &self.basis.registration.frame.mounting,
                     position_params,
                 );
@@ -355,7 +396,7 @@ impl PaperModel {
             if let (false, Some(measured)) = (orientation_params.is_empty(), o.orientation) {
                 let j = error_jacobian_on(
                     dh,
-                    &frames,
+                    frames,
                     &self.basis.registration.frame.mounting,
                     orientation_params,
                 );
@@ -369,22 +410,23 @@ impl PaperModel {
         id
     }
 
-    /// Regression inputs of each observation: joint angles, the nominal TCP position, the extra inputs.
-    fn candidate_matrix(&self, observations: &[Observation]) -> DMatrix<f64> {
+    /// Regression inputs of each observation at its nominal flange pose: joint angles, the nominal TCP
+    /// position, the extra inputs.
+    fn candidate_matrix(
+        &self,
+        observations: &[Observation],
+        flanges: &[Isometry3<f64>],
+    ) -> DMatrix<f64> {
         let rows: Vec<Vec<f64>> = observations
             .iter()
-            .map(|o| self.candidates_of(&o.q, &o.inputs))
+            .zip(flanges)
+            .map(|(o, flange)| self.candidates_at(&o.q, &o.inputs, flange))
             .collect();
         DMatrix::from_fn(rows.len(), self.candidates.len(), |r, c| rows[r][c])
     }
 
-    /// `inputs`: the extra inputs in `extra_inputs` order; any other length (empty) stands for their
-    /// training means.
-    fn candidates_of(&self, q: &[f64], inputs: &[f64]) -> Vec<f64> {
-        self.candidates_at(q, inputs, &self.basis.dh.flange_pose(q))
-    }
-
-    /// [`PaperModel::candidates_of`] with the nominal flange pose at `q` given.
+    /// The regression inputs at `q` with the nominal flange pose there given; `inputs`: the extra inputs in
+    /// `extra_inputs` order, any other length (empty) standing for their training means.
     fn candidates_at(&self, q: &[f64], inputs: &[f64], flange: &Isometry3<f64>) -> Vec<f64> {
         let tcp = flange * self.basis.registration.frame.mounting;
         let extra = if inputs.len() == self.extra_inputs.len() {
@@ -546,52 +588,6 @@ fn regress(
         .collect())
 }
 
-/// A non-finite Jacobian or deviation (a configuration far outside the robot's range) gives NaN parameters,
-/// which the regression after it refuses, rather than an SVD that never returns.
-fn min_norm(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
-    let cols = j.ncols();
-    if !numeric::all_finite(rhs.iter()) {
-        return vec![f64::NAN; cols];
-    }
-    if let Some(x) = min_norm_full_rank(&j, &rhs) {
-        return x;
-    }
-    let Ok(svd) = numeric::svd(j, true, true, "eq. 13") else {
-        return vec![f64::NAN; cols];
-    };
-    let tol = svd.singular_values.max() * PINV_REL_EPS;
-    svd.solve(&rhs, tol)
-        .map(|x| x.iter().copied().collect())
-        .unwrap_or_else(|_| vec![0.0; j_cols(&svd)])
-}
-
-/// Below this, a row of `J_e` is too nearly in the span of the rows before it (the squared sine of the angle
-/// between them) for [`min_norm_full_rank`]: the minimum-norm solve goes to the SVD.
-const MIN_ROW_PIVOT: f64 = 1e-6;
-
-/// The minimum-norm solution `Jᵀ(JJᵀ)⁻¹Δ` where `J`'s three rows are clearly independent (each row's part
-/// outside the span of the rows before it at least `√MIN_ROW_PIVOT` of its length, the Cholesky factor of
-/// `JJᵀ` says): then the SVD's pseudo-inverse drops no singular value (`PINV_REL_EPS` is far below), and the
-/// two are the same solution in exact arithmetic, at a 3 × 3 Cholesky instead of an SVD of `J`. `None`
-/// otherwise (a wrist singularity, a non-finite `J`).
-fn min_norm_full_rank(j: &Matrix3xX<f64>, rhs: &Vector3<f64>) -> Option<Vec<f64>> {
-    let gram: Matrix3<f64> = j * j.transpose();
-    if !numeric::all_finite(gram.iter()) {
-        return None;
-    }
-    let ch = gram.cholesky()?;
-    let l = ch.l_dirty();
-    // A NaN pivot fails too.
-    if !(0..3).all(|i| l[(i, i)] * l[(i, i)] >= MIN_ROW_PIVOT * gram[(i, i)]) {
-        return None;
-    }
-    Some((j.transpose() * ch.solve(rhs)).iter().copied().collect())
-}
-
-fn j_cols(svd: &nalgebra::SVD<f64, nalgebra::U3, nalgebra::Dyn>) -> usize {
-    svd.v_t.as_ref().map_or(0, |v| v.ncols())
-}
-
 impl Fitted for PaperModel {
     fn info(&self) -> &'static MethodInfo {
         self.method
@@ -693,93 +689,5 @@ impl Fitted for PaperModel {
             },
             "r2": r2s,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::robot::dh::DhChain;
-    use crate::robot::urdf;
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-
-    /// The SVD's minimum-norm solution, as `min_norm` computed it before the closed form.
-    fn by_svd(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
-        let svd = numeric::svd(j, true, true, "test").unwrap();
-        let tol = svd.singular_values.max() * PINV_REL_EPS;
-        svd.solve(&rhs, tol).unwrap().iter().copied().collect()
-    }
-
-    /// The minimum-norm solution from a Householder QR of `Jᵀ = QR` (backward stable): `x = Q R⁻ᵀ Δ`.
-    fn by_qr(j: &Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
-        let qr = j.transpose().qr();
-        let r = qr.r();
-        let y = Matrix3::from_fn(|a, b| r[(b, a)])
-            .solve_lower_triangular(&rhs)
-            .unwrap();
-        (qr.q() * nalgebra::DVector::from_column_slice(y.as_slice()))
-            .iter()
-            .copied()
-            .collect()
-    }
-
-    fn relative(a: &[f64], b: &[f64]) -> f64 {
-        let d = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>();
-        (d / b.iter().map(|v| v * v).sum::<f64>()).sqrt()
-    }
-
-    /// Eq. 13 on the iiwa's Jacobians at random configurations, for each error model: the closed form is the
-    /// minimum-norm solution of a QR of `Jᵀ` to 1e-12 of its norm (nalgebra's SVD of the wide `J`, the
-    /// previous way, is further off: up to 1e-6, its residual as large), and solves the equation; a
-    /// Jacobian whose rows are dependent goes to the SVD.
-    #[test]
-    fn closed_form_min_norm_is_the_qrs() {
-        let chain = urdf::load_file("robots/iiwa7.urdf", None).unwrap();
-        let dh = DhChain::from_chain(&chain).unwrap();
-        let lower: Vec<f64> = chain.joints.iter().map(|j| j.lower).collect();
-        let upper: Vec<f64> = chain.joints.iter().map(|j| j.upper).collect();
-        let mounting = nalgebra::Point3::new(0.01, -0.02, 0.05);
-        let mut rng = ChaCha8Rng::seed_from_u64(13);
-        let (mut closed, mut worst, mut worst_svd) = (0, 0.0f64, 0.0f64);
-        for kind in [
-            ErrorModelKind::RotZ,
-            ErrorModelKind::RotXyz,
-            ErrorModelKind::RotXyzTransXyz,
-        ] {
-            let params = select_params(&dh, &lower, &upper, kind).position;
-            for _ in 0..300 {
-                let q: Vec<f64> = lower
-                    .iter()
-                    .zip(&upper)
-                    .map(|(&lo, &hi)| rng.random_range(lo..hi))
-                    .collect();
-                let frames = dh.frames(&q);
-                let j = error_jacobian_on(&dh, &frames, &mounting, &params)
-                    .fixed_rows::<3>(0)
-                    .into_owned();
-                let rhs = Vector3::from_fn(|_, _| rng.random_range(-1e-3..1e-3));
-                let want = by_qr(&j, rhs);
-                let got = min_norm(j.clone(), rhs);
-                if min_norm_full_rank(&j, &rhs).is_some() {
-                    closed += 1;
-                }
-                worst = worst.max(relative(&got, &want));
-                worst_svd = worst_svd.max(relative(&by_svd(j.clone(), rhs), &want));
-                let x = nalgebra::DVector::from_vec(got);
-                assert!((&j * x - rhs).norm() <= 1e-12 * rhs.norm());
-            }
-        }
-        assert!(
-            worst <= 1e-12,
-            "closed form off the QR's by {worst:e} of the norm"
-        );
-        assert!(worst_svd <= 1e-5, "the SVD off the QR's by {worst_svd:e}");
-        assert!(closed >= 890, "closed form on {closed} of 900 Jacobians");
-        // Two equal rows: rank 2, the SVD's pseudo-inverse.
-        let j = Matrix3xX::from_row_slice(&[1.0, 2.0, 0.5, 1.0, 2.0, 0.5, 0.0, 1.0, 3.0]);
-        let rhs = Vector3::new(1.0, 1.0, 2.0);
-        assert!(min_norm_full_rank(&j, &rhs).is_none());
-        assert_eq!(min_norm(j.clone(), rhs), by_svd(j, rhs));
     }
 }
