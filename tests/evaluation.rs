@@ -164,6 +164,7 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
         split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
+        share: None,
         chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.world.robot.payload(),
@@ -218,6 +219,7 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
         split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
+        share: None,
         chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.world.robot.payload(),

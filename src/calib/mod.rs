@@ -5,7 +5,8 @@
 //!
 //! 1. `rigid` (point-set registration by SVD), `regression/` (ridge models and their selection),
 //!    `error_model` (the paper's error parameters on the DH chain), `reduced` (a tall least-squares problem
-//!    as Levenberg–Marquardt's equivalent small one) — no other file of calib;
+//!    as Levenberg–Marquardt's equivalent small one), `min_norm` (eq. 13's minimum-norm solve) — no other
+//!    file of calib;
 //! 2. `tracker_frame` (the tracker frame and mounting every method starts from: `Registration`, `Observation`)
 //!    — `rigid`, `reduced`; `correction` (ridge models of what a reference prediction leaves: `ResidualCorrection`)
 //!    — `tracker_frame`, `regression`;
@@ -35,6 +36,7 @@ pub mod domain;
 pub mod error_model;
 pub mod kinematic;
 pub mod method;
+pub mod min_norm;
 pub mod reduced;
 pub mod motion_inputs;
 pub mod paper;

@@ -10,27 +10,22 @@
 //! 4. Predict: the modelled `E_i` go into the full kinematics (eq. 6); position from the position parameters,
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix3xX, Point3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::domain::Domain;
 use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian_on, flange_pose_with_errors,
     flange_pose_with_errors_on, frame_errors, select_params,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
-use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
-use super::tracker_frame::{Observation, Registration};
+use super::min_norm::min_norm;
+use super::regression::{RegressionOptions, RidgeModel, SharedCandidates, r2};
+use super::tracker_frame::Observation;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::numeric;
 use crate::robot::dh::ChainPose;
 use crate::robot::plausible;
-
-/// Singular values below this fraction of the largest are treated as zero in the minimum-norm solves: the
-/// paper's indistinguishable parameters (eq. 14–16, 22) make `J_e` rank-deficient by construction.
-const PINV_REL_EPS: f64 = 1e-10;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ParameterModel {
@@ -223,6 +218,31 @@ impl PaperModel {
     }
 }
 
+/// What the paper's error models fitted on the same sets start from alike, after the registration: the
+/// observations, and the regressions' candidate rows with the factorizations their searches compute.
+struct Prepared {
+    obs_train: Vec<Observation>,
+    obs_val: Vec<Observation>,
+    candidates: SharedCandidates,
+}
+
+impl Prepared {
+    /// `model`: the registered model ([`PaperModel::registered`]) of `train` and `val`.
+    fn of(model: &PaperModel, train: &Dataset, val: &Dataset) -> Result<Prepared> {
+        let registration = &model.basis.registration;
+        let (obs_train, obs_val) = (registration.observe(train)?, registration.observe(val)?);
+        let candidates = SharedCandidates::new(
+            model.candidate_matrix(&obs_train),
+            model.candidate_matrix(&obs_val),
+        );
+        Ok(Prepared {
+            obs_train,
+            obs_val,
+            candidates,
+        })
+    }
+}
+
 /// Per-point identified error parameters (eq. 13), for the regression and for R² on the test split.
 #[derive(Clone, Debug)]
 pub struct Identified {
@@ -250,21 +270,25 @@ impl PaperModel {
         } else {
             Vec::new()
         };
-        let (obs_train, obs_val) = (
-            model.basis.registration.observe(train)?,
-            model.basis.registration.observe(val)?,
-        );
-        let id_train = model.identify(&obs_train, &selection.position, &orientation_params);
-        let id_val = model.identify(&obs_val, &selection.position, &orientation_params);
+        // The observations and candidate rows are every error model's on these sets: shared with the other
+        // paper methods fitted on them (an error is not shared: this fit meets it again).
+        let shared = ctx.shared("paper", train, val, || Prepared::of(&model, train, val));
+        let own;
+        let prepared = match &*shared {
+            Ok(p) => p,
+            Err(_) => {
+                own = Prepared::of(&model, train, val)?;
+                &own
+            }
+        };
+        let (obs_train, obs_val) = (&prepared.obs_train, &prepared.obs_val);
+        let id_train = model.identify(obs_train, &selection.position, &orientation_params);
+        let id_val = model.identify(obs_val, &selection.position, &orientation_params);
         // Position and orientation parameters regress on the same candidates, and parameters with the same
-        // ranking of the candidates on the same structures.
-        let mut candidates = Candidates::new(
-            model.candidate_matrix(&obs_train),
-            model.candidate_matrix(&obs_val),
-        )
-        .keeping_factors();
-        let mut regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
-            regress(params, &mut candidates, y_train, y_val, &ctx.regression)
+        // ranking of the candidates (of this error model or another) on the same structures.
+        let candidates = &prepared.candidates;
+        let regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
+            regress(params, candidates, y_train, y_val, &ctx.regression)
         };
         model.position = regress(&selection.position, &id_train.position, &id_val.position)?;
         model.orientation = regress(
@@ -291,7 +315,7 @@ impl PaperModel {
             )));
         }
         let dh = ctx.dh;
-        let registration = Registration::fit(dh, train, val)?;
+        let registration = ctx.registration(train, val)?;
         let extra_inputs = train.extra_input_names().to_vec();
         if val.extra_input_names() != extra_inputs.as_slice() {
             return Err(Error::Invalid(format!(
@@ -309,7 +333,7 @@ impl PaperModel {
                 joint_names: train.joint_names.clone(),
                 dh: dh.clone(),
                 registration,
-                domain: Domain::of(train, val),
+                domain: ctx.domain(train, val),
             },
             candidates: train
                 .joint_names
@@ -405,7 +429,7 @@ impl PaperModel {
     }
 
     /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
-    /// Outside the training domain the regressions are weighted as [`Domain::weight`] says.
+    /// Outside the training domain the regressions are weighted as [`super::domain::Domain::weight`] says.
     pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
         // `nominal` has no parameter: nothing to place in the domain or regress.
         if self.position.is_empty() && self.orientation.is_empty() {
@@ -524,7 +548,7 @@ fn check_identifiable(kind: ErrorModelKind, n_train: usize, n_params: usize) -> 
 /// rows); the rows of `y_train` and `y_val` hold the parameters' identified values per point.
 fn regress(
     params: &[ErrorParam],
-    candidates: &mut Candidates,
+    candidates: &SharedCandidates,
     y_train: &[Vec<f64>],
     y_val: &[Vec<f64>],
     opts: &RegressionOptions,
@@ -544,52 +568,6 @@ fn regress(
             model: m,
         })
         .collect())
-}
-
-/// A non-finite Jacobian or deviation (a configuration far outside the robot's range) gives NaN parameters,
-/// which the regression after it refuses, rather than an SVD that never returns.
-fn min_norm(j: Matrix3xX<f64>, rhs: Vector3<f64>) -> Vec<f64> {
-    let cols = j.ncols();
-    if !numeric::all_finite(rhs.iter()) {
-        return vec![f64::NAN; cols];
-    }
-    if let Some(x) = min_norm_full_rank(&j, &rhs) {
-        return x;
-    }
-    let Ok(svd) = numeric::svd(j, true, true, "eq. 13") else {
-        return vec![f64::NAN; cols];
-    };
-    let tol = svd.singular_values.max() * PINV_REL_EPS;
-    svd.solve(&rhs, tol)
-        .map(|x| x.iter().copied().collect())
-        .unwrap_or_else(|_| vec![0.0; j_cols(&svd)])
-}
-
-/// Below this, a row of `J_e` is too nearly in the span of the rows before it (the squared sine of the angle
-/// between them) for [`min_norm_full_rank`]: the minimum-norm solve goes to the SVD.
-const MIN_ROW_PIVOT: f64 = 1e-6;
-
-/// The minimum-norm solution `Jᵀ(JJᵀ)⁻¹Δ` where `J`'s three rows are clearly independent (each row's part
-/// outside the span of the rows before it at least `√MIN_ROW_PIVOT` of its length, the Cholesky factor of
-/// `JJᵀ` says): then the SVD's pseudo-inverse drops no singular value (`PINV_REL_EPS` is far below), and the
-/// two are the same solution in exact arithmetic, at a 3 × 3 Cholesky instead of an SVD of `J`. `None`
-/// otherwise (a wrist singularity, a non-finite `J`).
-fn min_norm_full_rank(j: &Matrix3xX<f64>, rhs: &Vector3<f64>) -> Option<Vec<f64>> {
-    let gram: Matrix3<f64> = j * j.transpose();
-    if !numeric::all_finite(gram.iter()) {
-        return None;
-    }
-    let ch = gram.cholesky()?;
-    let l = ch.l_dirty();
-    // A NaN pivot fails too.
-    if !(0..3).all(|i| l[(i, i)] * l[(i, i)] >= MIN_ROW_PIVOT * gram[(i, i)]) {
-        return None;
-    }
-    Some((j.transpose() * ch.solve(rhs)).iter().copied().collect())
-}
-
-fn j_cols(svd: &nalgebra::SVD<f64, nalgebra::U3, nalgebra::Dyn>) -> usize {
-    svd.v_t.as_ref().map_or(0, |v| v.ncols())
 }
 
 impl Fitted for PaperModel {
@@ -699,8 +677,11 @@ impl Fitted for PaperModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::min_norm::{PINV_REL_EPS, min_norm_full_rank};
+    use crate::numeric;
     use crate::robot::dh::DhChain;
     use crate::robot::urdf;
+    use nalgebra::{Matrix3, Matrix3xX, Vector3};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
