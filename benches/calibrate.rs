@@ -57,6 +57,7 @@ fn bench(scenario_path: &str, methods: &[MethodKind], cross_terms: bool, only: &
         .build()
         .expect("pool");
     let ctx = FitContext {
+        share: None,
         chain: &sim.world.nominal,
         dh: &dh,
         payload: scenario.world.robot.payload(),

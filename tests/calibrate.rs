@@ -29,6 +29,7 @@ fn fit_constant_errors(cross_terms: bool) -> Outcome {
         s.data.subset(&idx(900, 1200)),
     );
     let ctx = FitContext {
+        share: None,
         chain: &s.chain,
         dh: &s.dh,
         payload: Payload::NONE,

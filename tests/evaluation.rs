@@ -176,6 +176,7 @@ fn a_methods_truth_error_is_measured_in_its_own_registered_frame() {
         split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
+        share: None,
         chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.world.robot.payload(),
@@ -230,6 +231,7 @@ fn the_oracle_closes_the_loop_and_the_nominal_model_does_not() {
         split_campaign(&f.sim, small_config().split, f.scenario.world.seed).unwrap();
     let dh = DhChain::from_chain(&f.sim.world.nominal).unwrap();
     let ctx = FitContext {
+        share: None,
         chain: &f.sim.world.nominal,
         dh: &dh,
         payload: f.scenario.world.robot.payload(),

@@ -33,6 +33,7 @@ fn random_errors(sigma: f64, seed: u64) -> FrameErrors {
 
 fn context<'a>(chain: &'a Chain, dh: &'a DhChain, payload: Payload) -> FitContext<'a> {
     FitContext {
+        share: None,
         chain,
         dh,
         payload,

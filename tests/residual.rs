@@ -50,6 +50,7 @@ fn splits(s: &Synthetic) -> (Dataset, Dataset, Dataset) {
 
 fn ctx<'a>(s: &'a Synthetic, cross_terms: bool) -> FitContext<'a> {
     FitContext {
+        share: None,
         chain: &s.chain,
         dh: &s.dh,
         payload: Payload::NONE,

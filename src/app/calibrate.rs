@@ -173,6 +173,7 @@ impl Inputs {
 
     fn ctx(&self, options: &FitOptions) -> FitContext<'_> {
         FitContext {
+            share: None,
             chain: &self.chain,
             dh: &self.dh,
             payload: options.payload,

@@ -140,6 +140,7 @@ pub fn curve(options: &CurveOptions) -> Result<CurveOutcome> {
         options.ignore_inputs,
     )?;
     let ctx = FitContext {
+        share: None,
         chain: &chain,
         dh: &dh,
         payload,

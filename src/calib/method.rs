@@ -8,6 +8,7 @@
 
 use std::any::Any;
 use std::fmt;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -151,6 +152,56 @@ pub struct FitContext<'a> {
     /// The payload the user declares (for gravity torques of the elastic models).
     pub payload: Payload,
     pub regression: RegressionOptions,
+    /// What the methods fitted on the same sets under this context compute alike ([`FitShare`]); `None`: each
+    /// fit computes its own.
+    pub share: Option<&'a FitShare<'a>>,
+}
+
+/// What several methods fitted on one pair of training and validation sets (a study's campaign) compute alike,
+/// whatever the method: the tracker-frame registration, the training domain, a family of methods' own
+/// preparation (the paper's candidate rows and their factorizations). The first fit that asks computes a value
+/// and the others take it; a value is a function of the sets and the context alone, so every fit gets the bits
+/// it would have computed itself, whichever thread came first.
+pub struct FitShare<'d> {
+    train: &'d Dataset,
+    val: &'d Dataset,
+    slots: Mutex<Vec<(&'static str, Arc<dyn Any + Send + Sync>)>>,
+}
+
+impl<'d> FitShare<'d> {
+    /// Values shared by the fits on `train` and `val`.
+    pub fn new(train: &'d Dataset, val: &'d Dataset) -> FitShare<'d> {
+        FitShare {
+            train,
+            val,
+            slots: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// Whether `train` and `val` are the sets this holds (the very values, not equal ones).
+    fn holds(&self, train: &Dataset, val: &Dataset) -> bool {
+        std::ptr::eq(train, self.train) && std::ptr::eq(val, self.val)
+    }
+
+    /// The value named `name` (of type `T`), made by `make` on first use.
+    fn get<T: Any + Send + Sync>(&self, name: &'static str, make: impl FnOnce() -> T) -> Arc<T> {
+        let find = |slots: &[(&'static str, Arc<dyn Any + Send + Sync>)]| {
+            slots
+                .iter()
+                .filter(|(n, _)| *n == name)
+                .find_map(|(_, v)| v.clone().downcast::<T>().ok())
+        };
+        if let Some(v) = find(&self.slots.lock().unwrap_or_else(PoisonError::into_inner)) {
+            return v;
+        }
+        // Made outside the lock: the other fits go on meanwhile, and one that made it too keeps the first.
+        let made = Arc::new(make());
+        let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
+        find(&slots).unwrap_or_else(|| {
+            slots.push((name, made.clone()));
+            made
+        })
+    }
 }
 
 impl<'a> FitContext<'a> {
@@ -161,7 +212,63 @@ impl<'a> FitContext<'a> {
             dh,
             payload: Payload::NONE,
             regression: RegressionOptions::default(),
+            share: None,
         }
+    }
+
+    /// This context for fits on the sets of `share`, which share what they compute alike.
+    pub fn sharing<'b>(&self, share: &'b FitShare<'b>) -> FitContext<'b>
+    where
+        'a: 'b,
+    {
+        FitContext {
+            chain: self.chain,
+            dh: self.dh,
+            payload: self.payload,
+            regression: self.regression.clone(),
+            share: Some(share),
+        }
+    }
+
+    /// The value named `name` that `make` computes from `train` and `val` (and this context), computed once
+    /// for every fit that shares them ([`FitShare`]).
+    pub fn shared<T: Any + Send + Sync>(
+        &self,
+        name: &'static str,
+        train: &Dataset,
+        val: &Dataset,
+        make: impl FnOnce() -> T,
+    ) -> Arc<T> {
+        match self.share {
+            Some(s) if s.holds(train, val) => s.get(name, make),
+            _ => Arc::new(make()),
+        }
+    }
+
+    /// The tracker-frame registration on `train` and `val` ([`Registration::fit`] on the nominal chain),
+    /// shared.
+    pub fn registration(&self, train: &Dataset, val: &Dataset) -> Result<Registration> {
+        self.registration_by(train, val, || Registration::fit(self.dh, train, val))
+    }
+
+    /// [`FitContext::registration`], computed by `fit` where it is not shared yet: `fit` must give
+    /// [`Registration::fit`]'s bits (e.g. [`Registration::fit_at`] with flange poses the caller has).
+    pub fn registration_by(
+        &self,
+        train: &Dataset,
+        val: &Dataset,
+        fit: impl Fn() -> Result<Registration>,
+    ) -> Result<Registration> {
+        match &*self.shared("registration", train, val, &fit) {
+            Ok(r) => Ok(r.clone()),
+            // An error is not shared: the fit says it again.
+            Err(_) => fit(),
+        }
+    }
+
+    /// The training domain of `train` and `val` ([`Domain::of`]), shared.
+    pub fn domain(&self, train: &Dataset, val: &Dataset) -> Domain {
+        (*self.shared("domain", train, val, || Domain::of(train, val))).clone()
     }
 
     /// What every method fitted in `world` may know: its nominal robot and the payload the user declares —

@@ -302,7 +302,7 @@ mod tests {
     use nalgebra::{Isometry3, Point3};
 
     use super::*;
-    use crate::calib::method::Basis;
+    use crate::calib::method::{Basis, FitShare};
     use crate::calib::tracker_frame::{Registration, TrackerFrame};
     use crate::robot::dh::DhChain;
     use crate::robot::urdf;
@@ -425,11 +425,26 @@ mod tests {
             Dataset::in_memory("synthetic", chain.joint_names(), q, measured)
         };
         let (train, val, test) = (set(150), set(75), set(10));
-        for kind in MethodKind::ALL {
+        // Every method fitted at once on the same sets, sharing what they compute alike: the models below,
+        // fitted alone, are the same to the bit (their `model.json` text).
+        let share = FitShare::new(&train, &val);
+        let sharing = ctx.sharing(&share);
+        let (sharing, train_ref, val_ref) = (&sharing, &train, &val);
+        let shared: Vec<String> = std::thread::scope(|s| {
+            let fits: Vec<_> = MethodKind::ALL
+                .into_iter()
+                .map(|kind| s.spawn(move || kind.fit(sharing, train_ref, val_ref).unwrap()))
+                .collect();
+            fits.into_iter()
+                .map(|f| serde_json::to_string(&f.join().unwrap().save().unwrap()).unwrap())
+                .collect()
+        });
+        for (kind, shared) in MethodKind::ALL.into_iter().zip(shared) {
             let model = kind
                 .fit(&ctx, &train, &val)
                 .unwrap_or_else(|e| panic!("{kind:?}: {e}"));
             let text = serde_json::to_string(&model.save().unwrap()).unwrap();
+            assert_eq!(text, shared, "{kind:?}");
             let back = serde_json::from_str::<SavedModel>(&text)
                 .unwrap()
                 .into_fitted()

@@ -157,7 +157,7 @@ pub struct ResidualModel {
 impl ResidualModel {
     pub fn fit(ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<ResidualModel> {
         check_sets(RESIDUAL_RIDGE.name, train, val)?;
-        let mut registration = Registration::fit(ctx.dh, train, val)?;
+        let mut registration = ctx.registration(train, val)?;
         let centres: Vec<Point3<f64>> = train
             .measured
             .iter()
@@ -178,7 +178,7 @@ impl ResidualModel {
         let flanges: Vec<Isometry3<f64>> = q.iter().map(|q| ctx.dh.flange_pose(q)).collect();
         // The rounds refit on the same points: their candidate rows, domain and nominal flange poses are the
         // same every round; only the registration moves.
-        let domain = Domain::of(train, val);
+        let domain = ctx.domain(train, val);
         let (mut obs_train, mut obs_val) =
             (registration.observe(train)?, registration.observe(val)?);
         let mut setup =
@@ -311,7 +311,7 @@ impl Fitted for ResidualModel {
         true
     }
 
-    /// Outside the training domain the residual is weighted as [`Domain::weight`] says.
+    /// Outside the training domain the residual is weighted as [`super::domain::Domain::weight`] says.
     fn predict_with(&self, q: &[f64], inputs: &[f64]) -> Prediction {
         let (position, orientation) = self.corrected(q, inputs, &self.reference(q));
         Prediction {

@@ -28,7 +28,7 @@ use super::shard::{Shard, StudyPart, assemble};
 use super::{
     Detail, DetailPoint, GridPoint, Histogram, RunKey, RunMetrics, StudyConfig, StudyResult,
 };
-use crate::calib::method::{FitContext, Fitted};
+use crate::calib::method::{FitContext, FitShare, Fitted};
 use crate::calib::registry::{MethodKind, REFERENCE};
 use crate::campaign::{Campaign, CampaignConfig, LayoutKind, RegionConfig, Selector};
 use crate::dataset::Dataset;
@@ -464,11 +464,14 @@ impl Shared<'_> {
                 .map(|s| s.mean)
             });
             let observability = self.observability(&train);
+            // The methods fitted on these sets compute their registration (and more) once.
+            let share = FitShare::new(&train, &val);
+            let ctx = self.ctx.sharing(&share);
             let runs: Vec<(usize, MethodRun)> = methods
                 .par_iter()
                 .map(|&m| {
-                    let mut outcome =
-                        self.method(job, m, &campaign, &train, &val, floor_mean, detail_job);
+                    let sets = (&campaign, &train, &val);
+                    let mut outcome = self.method(job, m, &ctx, sets, floor_mean, detail_job);
                     if outcome.metrics.failure.is_none() {
                         outcome.metrics.observability = observability[m];
                     }
@@ -526,19 +529,18 @@ impl Shared<'_> {
         )
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// Method `m` fitted (under `ctx`) on the job's campaign's training and validation sets, and judged.
     fn method(
         &self,
         job: Job,
         m: usize,
-        campaign: &Campaign,
-        train: &Dataset,
-        val: &Dataset,
+        ctx: &FitContext,
+        (campaign, train, val): (&Campaign, &Dataset, &Dataset),
         floor_mean: Option<f64>,
         detail_job: bool,
     ) -> MethodRun {
         let started = Instant::now();
-        let fitted = self.kinds[m].fit(&self.ctx, train, val);
+        let fitted = self.kinds[m].fit(ctx, train, val);
         let fit_ms = self.fit_ms(started);
         let sets = &self.regions[job.region];
         let judged = fitted.and_then(|model| {

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::StudyConfig;
 use super::measure::{Measure, campaign_seed, layout_index};
 use crate::calib::clock;
-use crate::calib::method::{FitContext, Fitted};
+use crate::calib::method::{FitContext, FitShare, Fitted};
 use crate::calib::motion_inputs::with_motion_inputs;
 use crate::calib::registry::MethodKind;
 use crate::campaign::config::TrajectoryConfig;
@@ -400,13 +400,15 @@ impl PathContext<'_> {
             samples.data.subset(&samples.train),
             samples.data.subset(&samples.val),
         );
+        let share = FitShare::new(&train, &val);
+        let ctx = self.ctx.sharing(&share);
         let fitted: Vec<(TrajectoryRun, Option<TrajectoryDetail>)> = self
             .config
             .methods
             .par_iter()
             .map(|&method| {
                 let mut detail = None;
-                let (truth, failure) = match method.fit(self.ctx, &train, &val) {
+                let (truth, failure) = match method.fit(&ctx, &train, &val) {
                     Ok(model) => {
                         if job.shown && Some(method) == self.config.detail_method() {
                             detail = Some(sampled(
@@ -455,6 +457,8 @@ impl PathContext<'_> {
             &self.ctx.payload,
         )?;
         let (train, val) = (moving.subset(&samples.train), moving.subset(&samples.val));
+        let share = FitShare::new(&train, &val);
+        let ctx = self.ctx.sharing(&share);
         let truth = self.truth[job.r];
         Ok(self
             .config
@@ -462,7 +466,7 @@ impl PathContext<'_> {
             .par_iter()
             .filter(|k| k.info().takes_inputs)
             .map(|&method| {
-                let (truth, failure) = match method.fit(self.ctx, &train, &val) {
+                let (truth, failure) = match method.fit(&ctx, &train, &val) {
                     // At the inputs' defaults: the motion's are zero, the arm at rest.
                     Ok(model) => (grid_stats(model.as_ref(), truth), None),
                     Err(e) => (None, Some(e.detail())),

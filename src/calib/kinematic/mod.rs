@@ -86,10 +86,9 @@ pub use params::{Param, candidates};
 use problem::Problem;
 pub use solve::Termination;
 
-use super::domain::Domain;
 use super::error_model::{FrameErrors, flange_pose_with_errors, flange_pose_with_errors_on};
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
-use super::tracker_frame::{Observation, Registration};
+use super::tracker_frame::Observation;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::robot::dh::ChainPose;
@@ -223,7 +222,7 @@ impl KinematicModel {
         let method = if elastic { &ELASTIC } else { &KINEMATIC };
         let dh = ctx.dh;
         fit::check_points(method, dh.dof(), train, val)?;
-        let registration = Registration::fit(dh, train, val)?;
+        let registration = ctx.registration(train, val)?;
         let gravity = if elastic {
             Some(GravityModel::new(ctx.chain, dh, ctx.payload)?)
         } else {
@@ -285,7 +284,7 @@ impl KinematicModel {
                 joint_names: train.joint_names.clone(),
                 dh: dh.clone(),
                 registration: fit::refined(registration, &state, train_rms, evaluations),
-                domain: Domain::of(train, val),
+                domain: ctx.domain(train, val),
             },
             base_error,
             errors: state.errors.clone(),

@@ -11,24 +11,24 @@
 //!    orientation from the orientation parameters, each attributed as it was identified.
 
 mod eq13;
+mod fit;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion};
+use nalgebra::{DVector, Isometry3, Point3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::domain::Domain;
 use super::error_model::{
     ErrorModelKind, ErrorParam, FrameErrors, error_jacobian_on, flange_pose_with_errors,
-    flange_pose_with_errors_on, frame_errors, select_params,
+    flange_pose_with_errors_on, frame_errors,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
-use super::regression::{Candidates, RegressionOptions, RidgeModel, r2};
-use super::tracker_frame::{Observation, Registration};
+use super::regression::{RidgeModel, r2};
+use super::tracker_frame::Observation;
 use crate::dataset::Dataset;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::robot::dh::ChainPose;
 use crate::robot::plausible;
-use eq13::min_norm;
+pub use fit::Identified;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ParameterModel {
@@ -220,211 +220,7 @@ impl PaperModel {
         Ok(())
     }
 }
-
-/// Per-point identified error parameters (eq. 13), for the regression and for R² on the test split.
-#[derive(Clone, Debug)]
-pub struct Identified {
-    pub position: Vec<Vec<f64>>,
-    pub orientation: Vec<Vec<f64>>,
-}
-
 impl PaperModel {
-    /// Fits on `train`, choosing hyper-parameters on `val`; `kind = None` is the `nominal` method.
-    pub fn fit(
-        kind: Option<ErrorModelKind>,
-        ctx: &FitContext,
-        train: &Dataset,
-        val: &Dataset,
-    ) -> Result<PaperModel> {
-        let Some(kind) = kind else {
-            return PaperModel::registered(None, ctx, train, val, None);
-        };
-        // One pass over the chain per point gives the registration its flange poses, eq. 13 its Jacobians'
-        // frames and the regression its nominal TCP positions.
-        let dh = ctx.dh;
-        let fixed = dh.fixed_rotations();
-        let frames: Vec<Vec<Isometry3<f64>>> = train
-            .q
-            .iter()
-            .chain(&val.q)
-            .map(|q| dh.frames_fixed(q, &fixed))
-            .collect();
-        let flanges: Vec<Isometry3<f64>> = frames.iter().map(|f| f[dh.dof()] * dh.tool).collect();
-        let mut model = PaperModel::registered(Some(kind), ctx, train, val, Some(&flanges))?;
-        let (lower, upper) = ctx.limits();
-        let selection = select_params(ctx.dh, &lower, &upper, kind);
-        check_identifiable(kind, train.len(), selection.position.len())?;
-        let orientation_params = if model.basis.registration.measures_orientation() {
-            selection.orientation_only.clone()
-        } else {
-            Vec::new()
-        };
-        let (obs_train, obs_val) = (
-            model.basis.registration.observe(train)?,
-            model.basis.registration.observe(val)?,
-        );
-        let (frames_train, frames_val) = frames.split_at(train.len());
-        let (flanges_train, flanges_val) = flanges.split_at(train.len());
-        let id_train = model.identify_at(
-            &obs_train,
-            frames_train,
-            &selection.position,
-            &orientation_params,
-        );
-        let id_val = model.identify_at(
-            &obs_val,
-            frames_val,
-            &selection.position,
-            &orientation_params,
-        );
-        // Position and orientation parameters regress on the same candidates, and parameters with the same
-        // ranking of the candidates on the same structures.
-        let mut candidates = Candidates::new(
-            model.candidate_matrix(&obs_train, flanges_train),
-            model.candidate_matrix(&obs_val, flanges_val),
-        )
-        .keeping_factors();
-        let mut regress = |params: &[ErrorParam], y_train: &[Vec<f64>], y_val: &[Vec<f64>]| {
-            regress(params, &mut candidates, y_train, y_val, &ctx.regression)
-        };
-        model.position = regress(&selection.position, &id_train.position, &id_val.position)?;
-        model.orientation = regress(
-            &orientation_params,
-            &id_train.orientation,
-            &id_val.orientation,
-        )?;
-        Ok(model)
-    }
-
-    /// The `nominal` model: the registered tracker frame and mounting, the candidates of the regressions and
-    /// the extra inputs' defaults, with no parameter model yet. `flanges`: the nominal flange poses of the
-    /// training, then the validation points, where the caller has them.
-    fn registered(
-        kind: Option<ErrorModelKind>,
-        ctx: &FitContext,
-        train: &Dataset,
-        val: &Dataset,
-        flanges: Option<&[Isometry3<f64>]>,
-    ) -> Result<PaperModel> {
-        if train.is_empty() || val.is_empty() {
-            return Err(Error::Invalid(format!(
-                "{} training and {} validation points: both sets must be non-empty",
-                train.len(),
-                val.len()
-            )));
-        }
-        let dh = ctx.dh;
-        let registration = match flanges {
-            Some(flanges) => Registration::fit_at(dh, train, val, flanges)?,
-            None => Registration::fit(dh, train, val)?,
-        };
-        let extra_inputs = train.extra_input_names().to_vec();
-        if val.extra_input_names() != extra_inputs.as_slice() {
-            return Err(Error::Invalid(format!(
-                "the training data has extra inputs [{}], the validation data [{}]",
-                extra_inputs.join(", "),
-                val.extra_input_names().join(", ")
-            )));
-        }
-        // Training means, and zero for the motion (the arm at rest): what a prediction takes unless told.
-        let extra_input_means = train.input_defaults();
-        Ok(PaperModel {
-            method: info_of(kind),
-            kind,
-            basis: Basis {
-                joint_names: train.joint_names.clone(),
-                dh: dh.clone(),
-                registration,
-                domain: Domain::of(train, val),
-            },
-            candidates: train
-                .joint_names
-                .iter()
-                .cloned()
-                .chain(["tcp_x", "tcp_y", "tcp_z"].map(String::from))
-                .chain(extra_inputs.iter().cloned())
-                .collect(),
-            extra_inputs,
-            extra_input_means,
-            position: Vec::new(),
-            orientation: Vec::new(),
-        })
-    }
-
-    /// Eq. 13 per point: minimum-norm error parameters explaining each observation's deviation.
-    pub fn identify(
-        &self,
-        observations: &[Observation],
-        position_params: &[ErrorParam],
-        orientation_params: &[ErrorParam],
-    ) -> Identified {
-        let dh = &self.basis.dh;
-        let fixed = dh.fixed_rotations();
-        let frames: Vec<Vec<Isometry3<f64>>> = observations
-            .iter()
-            .map(|o| dh.frames_fixed(&o.q, &fixed))
-            .collect();
-        self.identify_at(observations, &frames, position_params, orientation_params)
-    }
-
-    /// [`PaperModel::identify`] with each observation's frames of the nominal chain ([`DhChain::frames`]) given.
-    fn identify_at(
-        &self,
-        observations: &[Observation],
-        frames: &[Vec<Isometry3<f64>>],
-        position_params: &[ErrorParam],
-        orientation_params: &[ErrorParam],
-    ) -> Identified {
-        let mut id = Identified {
-            position: Vec::with_capacity(observations.len()),
-            orientation: Vec::with_capacity(observations.len()),
-        };
-        let dh = &self.basis.dh;
-        for (o, frames) in observations.iter().zip(frames) {
-            let flange = frames[dh.dof()] * dh.tool;
-            if !position_params.is_empty() {
-                let j = error_jacobian_on(
-                    dh,
-                    frames,
-                    &self.basis.registration.frame.mounting,
-                    position_params,
-                );
-                let dp = o.position - flange * self.basis.registration.frame.mounting;
-                id.position
-                    .push(min_norm(j.fixed_rows::<3>(0).into_owned(), dp));
-            }
-            if let (false, Some(measured)) = (orientation_params.is_empty(), o.orientation) {
-                let j = error_jacobian_on(
-                    dh,
-                    frames,
-                    &self.basis.registration.frame.mounting,
-                    orientation_params,
-                );
-                // The relative rotation, in the base frame, is what J_e linearizes; eq. 25's difference of
-                // rotation vectors equals it only to first order near the identity.
-                let dw = (measured * flange.rotation.inverse()).scaled_axis();
-                id.orientation
-                    .push(min_norm(j.fixed_rows::<3>(3).into_owned(), dw));
-            }
-        }
-        id
-    }
-
-    /// Regression inputs of each observation at its nominal flange pose: joint angles, the nominal TCP
-    /// position, the extra inputs.
-    fn candidate_matrix(
-        &self,
-        observations: &[Observation],
-        flanges: &[Isometry3<f64>],
-    ) -> DMatrix<f64> {
-        let rows: Vec<Vec<f64>> = observations
-            .iter()
-            .zip(flanges)
-            .map(|(o, flange)| self.candidates_at(&o.q, &o.inputs, flange))
-            .collect();
-        DMatrix::from_fn(rows.len(), self.candidates.len(), |r, c| rows[r][c])
-    }
-
     /// The regression inputs at `q` with the nominal flange pose there given; `inputs`: the extra inputs in
     /// `extra_inputs` order, any other length (empty) standing for their training means.
     fn candidates_at(&self, q: &[f64], inputs: &[f64], flange: &Isometry3<f64>) -> Vec<f64> {
@@ -447,7 +243,7 @@ impl PaperModel {
     }
 
     /// Modelled error parameters at configuration `q` with extra inputs `inputs` (empty: their means).
-    /// Outside the training domain the regressions are weighted as [`Domain::weight`] says.
+    /// Outside the training domain the regressions are weighted as [`super::domain::Domain::weight`] says.
     pub fn parameters_with(&self, q: &[f64], inputs: &[f64]) -> (Vec<f64>, Vec<f64>) {
         // `nominal` has no parameter: nothing to place in the domain or regress.
         if self.position.is_empty() && self.orientation.is_empty() {
@@ -544,48 +340,6 @@ impl PaperModel {
         let orientation = with_errors(&self.orientation, &eo).rotation;
         (position, orientation, ep)
     }
-}
-
-/// Three coordinates per point: with fewer than there are parameters not even a constant model of the
-/// parameters is determined, and the per-parameter regressions would fit noise.
-fn check_identifiable(kind: ErrorModelKind, n_train: usize, n_params: usize) -> Result<()> {
-    if 3 * n_train < n_params {
-        return Err(Error::Invalid(format!(
-            "{} training points measure {} coordinates, fewer than the {} error parameters of {}: \
-             the model cannot be identified; measure more points or choose a smaller model",
-            n_train,
-            3 * n_train,
-            n_params,
-            info_of(Some(kind)).name
-        )));
-    }
-    Ok(())
-}
-
-/// One ridge model per parameter of `params`, on the training candidate rows (chosen on the validation
-/// rows); the rows of `y_train` and `y_val` hold the parameters' identified values per point.
-fn regress(
-    params: &[ErrorParam],
-    candidates: &mut Candidates,
-    y_train: &[Vec<f64>],
-    y_val: &[Vec<f64>],
-    opts: &RegressionOptions,
-) -> Result<Vec<ParameterModel>> {
-    if params.is_empty() {
-        return Ok(Vec::new());
-    }
-    let to_matrix =
-        |rows: &[Vec<f64>]| DMatrix::from_fn(rows.len(), params.len(), |r, c| rows[r][c]);
-    let fitted = candidates.fit(&to_matrix(y_train), &to_matrix(y_val), opts)?;
-    Ok(params
-        .iter()
-        .zip(fitted)
-        .map(|(p, m)| ParameterModel {
-            param: *p,
-            name: p.name(),
-            model: m,
-        })
-        .collect())
 }
 
 impl Fitted for PaperModel {

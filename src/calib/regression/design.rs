@@ -3,6 +3,7 @@
 //! structure on sub-blocks of the Grams ([`Block`]); see the module notes of `regression`.
 
 use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, Dyn};
 
@@ -362,7 +363,7 @@ impl Block {
     }
 }
 
-type Factor = Cholesky<f64, Dyn>;
+pub(super) type Factor = Cholesky<f64, Dyn>;
 
 /// [`Block::factor`]s kept from one fit to the next on the same design: a factor depends on the features and
 /// α, not on the target, and `residual-ridge`'s rounds search the same structures on new residuals. Those the
@@ -406,6 +407,43 @@ impl Factors {
         self.map.retain(|_, (_, _, used)| *used == fit);
         self.fit += 1;
     }
+}
+
+/// [`Block::factor`]s kept for every fit on one design, from any thread: the same factors whichever fit computed
+/// them first (a function of the features and α alone). All are kept until the design is dropped.
+#[derive(Default)]
+pub(super) struct SharedFactors {
+    /// By feature columns and the α grid's bits: the factor at each α of the grid.
+    map: Mutex<HashMap<GridKey, GridFactors>>,
+}
+
+/// A structure's feature columns and an α grid's bits.
+type GridKey = (Vec<usize>, Vec<u64>);
+/// The factors of one structure at each α of a grid.
+type GridFactors = Arc<Vec<Option<Factor>>>;
+
+impl SharedFactors {
+    /// The factors of `block` (on features `idx`) at every α of `alphas`, in order, computed on first use
+    /// (outside the lock: a fit that computed them too keeps the first): one look-up per structure, not per α.
+    pub(super) fn get_all(&self, block: &Block, idx: &[usize], alphas: &[f64]) -> GridFactors {
+        let key = (idx.to_vec(), alphas.iter().map(|a| a.to_bits()).collect());
+        let lock = || self.map.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(f) = lock().get(&key) {
+            return f.clone();
+        }
+        let made = Arc::new(alphas.iter().map(|&a| block.factor(a)).collect());
+        lock().entry(key).or_insert(made).clone()
+    }
+}
+
+/// Where a search takes its factorizations from.
+pub(super) enum FactorSource<'a> {
+    /// Each computed where it is used.
+    None,
+    /// Kept from one fit to the next by one owner.
+    Own(&'a mut Factors),
+    /// Kept for every fit on the design.
+    Shared(&'a SharedFactors),
 }
 
 /// `fᵀf`, each entry below the diagonal the one above: `tr_mul`'s dot product of two columns takes the same

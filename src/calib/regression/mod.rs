@@ -17,11 +17,13 @@ mod design;
 mod model;
 mod stats;
 
+use std::sync::{Arc, Mutex, PoisonError};
+
 use nalgebra::{DMatrix, DVector, DVectorView};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use design::{Block, Design, Factors, Target, build};
+use design::{Block, Design, Factor, FactorSource, Factors, SharedFactors, Target, build};
 pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
 pub use stats::r2;
 
@@ -159,7 +161,11 @@ impl Candidates {
                 let y: Vec<f64> = y.iter().copied().collect();
                 let yv: Vec<f64> = yv.iter().copied().collect();
                 let target = Target::new(design, &y, &yv);
-                fit_one(design, &target, n, &alphas, opts, factors.as_mut())
+                let source = match factors.as_mut() {
+                    Some(f) => FactorSource::Own(f),
+                    None => FactorSource::None,
+                };
+                fit_one(design, &target, n, &alphas, opts, source)
             })
             .collect();
         if let Some(f) = factors {
@@ -176,6 +182,74 @@ impl Candidates {
     pub fn fitted(&self, model: &RidgeModel) -> Option<(Vec<f64>, Vec<f64>)> {
         let (_, design) = self.design.as_ref()?;
         design.fitted(model)
+    }
+}
+
+/// [`Candidates`] for several fits at once, from any thread: the paper's three error models, fitted on the same
+/// campaign, regress on the same candidate rows, and their parameters often rank the candidates alike. The
+/// design is built by the first fit and every factorization is kept for all of them (until this is dropped),
+/// so each [`SharedCandidates::fit`] gives what [`fit_all`] gives on the same arguments, bit for bit, whatever
+/// the order in which the fits run.
+pub struct SharedCandidates {
+    x_train: DMatrix<f64>,
+    x_val: DMatrix<f64>,
+    /// The design, for the (`max_degree`, `cross_terms`) of the first fit.
+    design: Mutex<Option<DesignFor>>,
+    factors: SharedFactors,
+}
+
+/// A design and the (`max_degree`, `cross_terms`) it was built for.
+type DesignFor = ((usize, bool), Arc<Design>);
+
+impl SharedCandidates {
+    pub fn new(x_train: DMatrix<f64>, x_val: DMatrix<f64>) -> SharedCandidates {
+        SharedCandidates {
+            x_train,
+            x_val,
+            design: Mutex::new(None),
+            factors: SharedFactors::default(),
+        }
+    }
+
+    /// [`fit_all`] on these candidate rows.
+    pub fn fit(
+        &self,
+        y_train: &DMatrix<f64>,
+        y_val: &DMatrix<f64>,
+        opts: &RegressionOptions,
+    ) -> Result<Vec<RidgeModel>> {
+        check_inputs(&self.x_train, y_train, &self.x_val, y_val, opts)?;
+        let key = (opts.max_degree, opts.cross_terms);
+        let lock = || self.design.lock().unwrap_or_else(PoisonError::into_inner);
+        let kept = lock().clone();
+        let design = match kept {
+            Some((k, design)) if k == key => design,
+            // Options of another search than the design's: a design of its own, nothing shared.
+            Some(_) => {
+                return Candidates::new(self.x_train.clone(), self.x_val.clone())
+                    .fit(y_train, y_val, opts);
+            }
+            None => {
+                // Built outside the lock; a fit that built it too keeps the first.
+                let made = Arc::new(Design::new(&self.x_train, &self.x_val, key.0, key.1)?);
+                lock().get_or_insert((key, made)).1.clone()
+            }
+        };
+        let n = self.x_train.nrows();
+        let mut alphas = opts.alphas.clone();
+        alphas.sort_by(|a, b| b.total_cmp(a));
+        alphas.dedup();
+        y_train
+            .column_iter()
+            .zip(y_val.column_iter())
+            .map(|(y, yv)| {
+                let y: Vec<f64> = y.iter().copied().collect();
+                let yv: Vec<f64> = yv.iter().copied().collect();
+                let target = Target::new(&design, &y, &yv);
+                let source = FactorSource::Shared(&self.factors);
+                fit_one(&design, &target, n, &alphas, opts, source)
+            })
+            .collect()
     }
 }
 
@@ -260,7 +334,7 @@ fn fit_one(
     n: usize,
     alphas: &[f64],
     opts: &RegressionOptions,
-    factors: Option<&mut Factors>,
+    factors: FactorSource,
 ) -> Result<RidgeModel> {
     let intercept_only = || build(design, target, &[], 0, 0.0, &DVector::zeros(0), target.rr);
     if target.constant {
@@ -296,7 +370,7 @@ fn fit_structures(
     order: &[usize],
     n: usize,
     alphas: &[f64],
-    mut factors: Option<&mut Factors>,
+    mut factors: FactorSource,
 ) -> Vec<RidgeFit> {
     let mut fitted = Vec::new();
     for degree in 1..=design.max_degree {
@@ -315,12 +389,18 @@ fn fit_structures(
         } else {
             idx.iter().map(|i| Block::new(design, target, i)).collect()
         };
-        // α descending, strict improvement: equal scores keep the stronger penalty.
-        let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
-        let kept = match (nested, factors.as_deref_mut()) {
-            (true, Some(f)) => Some(f.get(&blocks[0], largest, alphas)),
+        // Every α's factor of a kept structure at once: one look-up per structure, not per α.
+        let shared;
+        let kept: Option<&[Option<Factor>]> = match (nested, &mut factors) {
+            (true, FactorSource::Own(f)) => Some(f.get(&blocks[0], largest, alphas)),
+            (true, FactorSource::Shared(f)) => {
+                shared = f.get_all(&blocks[0], largest, alphas);
+                Some(&shared)
+            }
             _ => None,
         };
+        // α descending, strict improvement: equal scores keep the stronger penalty.
+        let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
         for (a, &alpha) in alphas.iter().enumerate() {
             // A solution is copied out only where it beats the best so far.
             let mut keep = |k: usize, w: DVectorView<f64>, sse: f64| {
@@ -657,6 +737,18 @@ mod tests {
         for _ in 0..2 {
             assert_eq!(kept.fit(&yt, &yv, &opts).unwrap(), want);
         }
+        // Shared by two fits at once whose targets rank the inputs alike (the same target negated): they take
+        // each other's factorizations, and each gives `fit_all`'s models.
+        let shared = SharedCandidates::new(xt.clone(), xv.clone());
+        let (nt, nv) = (-yt.clone(), -yv.clone());
+        let want_neg = fit_all(&xt, &nt, &xv, &nv, &opts).unwrap();
+        std::thread::scope(|s| {
+            let a = s.spawn(|| shared.fit(&yt, &yv, &opts).unwrap());
+            let b = s.spawn(|| shared.fit(&nt, &nv, &opts).unwrap());
+            assert_eq!(a.join().unwrap(), want);
+            assert_eq!(b.join().unwrap(), want_neg);
+        });
+        assert_eq!(shared.fit(&yt, &yv, &opts).unwrap(), want);
     }
 
     #[test]
