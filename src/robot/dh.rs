@@ -323,16 +323,23 @@ impl DhChain {
 
     /// The configuration `q` with its link transforms and frames ([`ChainPose`]).
     pub fn pose(&self, q: &[f64]) -> ChainPose {
+        self.pose_through(q, |i, qi| self.link_transform(i, qi))
+    }
+
+    /// [`DhChain::pose`] with the rows' fixed rotations computed once ([`DhChain::fixed_rotations`]): the same
+    /// links and frames, bit for bit, without two of each link's three sine–cosine pairs.
+    pub fn pose_fixed(&self, q: &[f64], fixed: &FixedRotations) -> ChainPose {
+        self.pose_through(q, |i, qi| self.link_transform_fixed(i, qi, fixed))
+    }
+
+    /// The links `link(i, q_i)` and the frames they make.
+    fn pose_through(&self, q: &[f64], link: impl Fn(usize, f64) -> Isometry3<f64>) -> ChainPose {
         assert_eq!(
             q.len(),
             self.dof(),
             "configuration length must equal the chain's dof"
         );
-        let links: Vec<Isometry3<f64>> = q
-            .iter()
-            .enumerate()
-            .map(|(i, &qi)| self.link_transform(i, qi))
-            .collect();
+        let links: Vec<Isometry3<f64>> = q.iter().enumerate().map(|(i, &qi)| link(i, qi)).collect();
         let mut frames = Vec::with_capacity(q.len() + 1);
         let mut pose = self.base;
         frames.push(pose);
@@ -545,6 +552,10 @@ mod tests {
             let q: Vec<f64> = (0..dh.dof()).map(|_| rng.random_range(-3.0..3.0)).collect();
             assert_eq!(dh.flange_pose_fixed(&q, &fixed), dh.flange_pose(&q));
             assert_eq!(dh.frames_fixed(&q, &fixed), dh.frames(&q));
+            let (pose, fixed_pose) = (dh.pose(&q), dh.pose_fixed(&q, &fixed));
+            assert_eq!(fixed_pose.links, pose.links);
+            assert_eq!(fixed_pose.frames, dh.frames(&q));
+            assert_eq!(fixed_pose.flange(&dh), dh.flange_pose(&q));
         }
         assert_ne!(
             dh.link_transform(2, 0.4),

@@ -17,7 +17,7 @@ use crate::calib::method::{FitContext, MethodInfo};
 use crate::calib::tracker_frame::{Observation, Registration, TrackerFrame};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::robot::dh::DhChain;
+use crate::robot::dh::{ChainPose, DhChain};
 
 /// Both sets have only finite measurements and finite joint angles, one per joint; training is not empty.
 pub(super) fn check_points(
@@ -48,16 +48,46 @@ pub(super) fn check_points(
     Ok(())
 }
 
-/// The points of the fit: the observations with the nominal gravity torques at them (`elastic`).
+/// The nominal chain at every training, then validation configuration, one pass each: its links are the
+/// fit's points' ([`points`]), its frames give the registration's flange poses ([`registration`]) and the
+/// gravity torques, the same bits as computing each from the angles again.
+pub(super) fn poses(dh: &DhChain, train: &Dataset, val: &Dataset) -> Vec<ChainPose> {
+    let fixed = dh.fixed_rotations();
+    train
+        .q
+        .iter()
+        .chain(&val.q)
+        .map(|q| dh.pose_fixed(q, &fixed))
+        .collect()
+}
+
+/// [`FitContext::registration`], from the flange poses of `poses` (of the training, then the validation
+/// points) where it is not shared yet: [`Registration::fit`]'s bits.
+pub(super) fn registration(
+    ctx: &FitContext,
+    train: &Dataset,
+    val: &Dataset,
+    poses: &[ChainPose],
+) -> Result<Registration> {
+    ctx.registration_by(train, val, || {
+        let flanges: Vec<Isometry3<f64>> = poses.iter().map(|p| p.flange(ctx.dh)).collect();
+        Registration::fit_at(ctx.dh, train, val, &flanges)
+    })
+}
+
+/// The points of the fit: the observations with their poses' links and the nominal gravity torques at them
+/// (`elastic`).
 pub(super) fn points(
     dh: &DhChain,
     gravity: Option<&GravityModel>,
     obs: Vec<Observation>,
+    poses: Vec<ChainPose>,
 ) -> Vec<Point> {
     obs.into_iter()
-        .map(|o| {
-            let tau = gravity.map_or_else(Vec::new, |g| g.torques(dh, &o.q));
-            Point::new(dh, &o.q, o.position, o.orientation, tau)
+        .zip(poses)
+        .map(|(o, pose)| {
+            let tau = gravity.map_or_else(Vec::new, |g| g.torques_on(dh, &pose.frames));
+            Point::with_links(pose.links, o.position, o.orientation, tau)
         })
         .collect()
 }

@@ -14,6 +14,7 @@ use super::problem::{Point, Problem};
 use crate::calib::method::FitContext;
 use crate::error::Result;
 use crate::robot::chain::sample_within;
+use crate::robot::dh::FixedRotations;
 
 /// Configurations of the structural analysis: enough that every parameter acting anywhere acts in many.
 pub(super) const STRUCT_SAMPLES: usize = 200;
@@ -337,12 +338,13 @@ pub(super) fn structural_set(
 ) -> Vec<Param> {
     let mut rng = ChaCha8Rng::seed_from_u64(STRUCT_SEED);
     let n = problem.dh.dof();
+    let fixed = problem.dh.fixed_rotations();
     let points = (0..STRUCT_SAMPLES)
         .map(|_| {
             let q: Vec<f64> = (0..n)
                 .map(|i| sample_within(lower[i], upper[i], &mut rng))
                 .collect();
-            synthetic_point(problem, gravity, q)
+            synthetic_point(problem, gravity, &q, &fixed)
         })
         .collect();
     let structural = Problem {
@@ -355,17 +357,19 @@ pub(super) fn structural_set(
     structural_columns(&structural, candidates)
 }
 
-/// A point that the initial state of `problem` fits exactly, so the Jacobian there is the one at the start.
+/// A point that the initial state of `problem` fits exactly, so the Jacobian there is the one at the start:
+/// its links, flange and gravity torques from one pass over the chain (`fixed`, its rows' fixed rotations).
 pub(super) fn synthetic_point(
     problem: &Problem,
     gravity: Option<&GravityModel>,
-    q: Vec<f64>,
+    q: &[f64],
+    fixed: &FixedRotations,
 ) -> Point {
-    let flange = problem.dh.flange_pose(&q);
-    let tau = gravity.map_or_else(Vec::new, |g| g.torques(problem.dh, &q));
-    Point::new(
-        problem.dh,
-        &q,
+    let pose = problem.dh.pose_fixed(q, fixed);
+    let flange = pose.flange(problem.dh);
+    let tau = gravity.map_or_else(Vec::new, |g| g.torques_on(problem.dh, &pose.frames));
+    Point::with_links(
+        pose.links,
         flange * problem.base.mount,
         problem.length.map(|_| flange.rotation),
         tau,
@@ -425,11 +429,12 @@ impl<'a> Identification<'a> {
     /// The Jacobian of the predicted measurement over the configurations `qs`, stacked in their order.
     pub fn jacobian(&self, qs: &[&[f64]]) -> DMatrix<f64> {
         let s = &self.problem;
+        let fixed = s.dh.fixed_rotations();
         let probe = Problem {
             dh: s.dh,
             points: qs
                 .iter()
-                .map(|q| synthetic_point(s, self.gravity.as_ref(), q.to_vec()))
+                .map(|q| synthetic_point(s, self.gravity.as_ref(), q, &fixed))
                 .collect(),
             length: s.length,
             base: s.base.clone(),

@@ -222,7 +222,8 @@ impl KinematicModel {
         let method = if elastic { &ELASTIC } else { &KINEMATIC };
         let dh = ctx.dh;
         fit::check_points(method, dh.dof(), train, val)?;
-        let registration = ctx.registration(train, val)?;
+        let mut poses = fit::poses(dh, train, val);
+        let registration = fit::registration(ctx, train, val, &poses)?;
         let gravity = if elastic {
             Some(GravityModel::new(ctx.chain, dh, ctx.payload)?)
         } else {
@@ -242,7 +243,8 @@ impl KinematicModel {
 
         // What the training data determine of it, at the noise of the measurement (see `noise`); the rest
         // stays nominal and is reported.
-        probe.points = fit::points(dh, gravity.as_ref(), registration.observe(train)?);
+        let val_poses = poses.split_off(train.len());
+        probe.points = fit::points(dh, gravity.as_ref(), registration.observe(train)?, poses);
         let at_base = fit::jacobian_at_base(&mut probe, &base, &structural);
         let floor = noise::floor(train, val);
         let solution = fit::solve_judged(
@@ -272,7 +274,7 @@ impl KinematicModel {
         let val_points = if val.is_empty() {
             Vec::new()
         } else {
-            fit::points(dh, gravity.as_ref(), registration.observe(val)?)
+            fit::points(dh, gravity.as_ref(), registration.observe(val)?, val_poses)
         };
         let validation_rms =
             (!val_points.is_empty()).then(|| problem::rms(dh, &state, &val_points));

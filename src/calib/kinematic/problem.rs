@@ -23,6 +23,7 @@ pub(super) struct Point {
 }
 
 impl Point {
+    #[cfg(test)]
     pub(super) fn new(
         dh: &DhChain,
         q: &[f64],
@@ -35,6 +36,19 @@ impl Point {
             .enumerate()
             .map(|(i, &qi)| dh.link_transform(i, qi))
             .collect();
+        Point::with_links(links, y, orientation, tau)
+    }
+
+    /// [`Point::new`] with its link transforms `A_i(q_i)` already computed (a [`ChainPose`]'s, whose frames
+    /// also served the registration and the gravity torques): the same point, one pass over the chain fewer.
+    ///
+    /// [`ChainPose`]: crate::robot::dh::ChainPose
+    pub(super) fn with_links(
+        links: Vec<Isometry3<f64>>,
+        y: Point3<f64>,
+        orientation: Option<UnitQuaternion<f64>>,
+        tau: Vec<f64>,
+    ) -> Point {
         Point {
             y,
             orientation,
