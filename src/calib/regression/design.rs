@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, Dyn};
+use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, DVectorViewMut, Dyn};
 
 use super::model::RidgeModel;
 use super::stats::{r2_from_sums, standardization, zero_sum_tol};
@@ -113,24 +113,36 @@ impl Design {
         w: &DVector<f64>,
     ) -> Vec<f64> {
         let idx = self.feature_indices(inputs, degree);
-        // Column by column (contiguous), each row's sum in feature order as a row-wise sum would take it.
+        // Column by column (contiguous), each row's sum in feature order as a row-wise sum would take it; the
+        // first column's products start the sums, and the residuals overwrite them in place.
         let rows = self.f_val.nrows();
         let column = |j: usize| &self.f_val.as_slice()[j * rows..(j + 1) * rows];
-        let mut fitted = vec![0.0; rows];
-        for (k, (&j, &wj)) in idx.iter().zip(w.iter()).enumerate() {
-            if k == 0 {
-                fitted
-                    .iter_mut()
-                    .zip(column(j))
-                    .for_each(|(a, f)| *a = f * wj);
-            } else {
-                fitted
-                    .iter_mut()
-                    .zip(column(j))
-                    .for_each(|(a, f)| *a += f * wj);
+        let mut terms = idx.iter().zip(w.iter());
+        let mut res: Vec<f64> = match terms.next() {
+            Some((&j, &wj)) => column(j).iter().map(|f| f * wj).collect(),
+            None => vec![0.0; rows],
+        };
+        // Four columns per pass over the rows: each row still adds its terms one by one in feature order.
+        let rest: Vec<(&[f64], f64)> = terms.map(|(&j, &wj)| (column(j), wj)).collect();
+        let mut quads = rest.chunks_exact(4);
+        for q in &mut quads {
+            let [(c0, w0), (c1, w1), (c2, w2), (c3, w3)] = [q[0], q[1], q[2], q[3]];
+            for (i, a) in res.iter_mut().enumerate() {
+                let mut v = *a;
+                v += c0[i] * w0;
+                v += c1[i] * w1;
+                v += c2[i] * w2;
+                v += c3[i] * w3;
+                *a = v;
             }
         }
-        target.r.iter().zip(fitted).map(|(r, f)| r - f).collect()
+        for &(c, wj) in quads.remainder() {
+            res.iter_mut().zip(c).for_each(|(a, f)| *a += f * wj);
+        }
+        res.iter_mut()
+            .zip(target.r.iter())
+            .for_each(|(a, r)| *a = r - *a);
+        res
     }
 
     /// [`RidgeModel::predict`] of `model` (fitted on this design) at every training row, then every validation
@@ -300,13 +312,14 @@ impl Block {
     /// columns before it; the forward substitution and the matrix–vector product work entry by entry), so
     /// each solution is bit for bit the one of the sub-block alone. Where the whole does not factor (collinear
     /// features at α ≈ 0), each sub-block is solved on its own.
-    /// `factor`: [`Block::factor`] at `alpha`.
+    /// `factor`: [`Block::factor`] at `alpha`; `scratch`: buffers reused from call to call.
     pub(super) fn solve_leading(
         &self,
         target: &Target,
         alpha: f64,
         sizes: &[usize],
         factor: Option<&Factor>,
+        scratch: &mut Scratch,
         mut each: impl FnMut(usize, DVectorView<f64>, f64),
     ) {
         let Some(ch) = factor else {
@@ -316,14 +329,22 @@ impl Block {
             }
             return;
         };
+        let p = self.b.len();
+        let Scratch { forward, w, gw } = scratch;
+        forward.clear();
+        forward.extend_from_slice(self.b.as_slice());
+        // One buffer for every size's solution and one for its product with the validation Gram: the
+        // product is `Gᵥ·w` as `*` computes it (`gemv`, α = 1, β = 0), with nothing allocated per call.
+        for v in [&mut *w, &mut *gw] {
+            v.clear();
+            v.resize(p, 0.0);
+        }
         // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
-        let mut forward = self.b.clone();
+        let mut forward = DVectorViewMut::from_slice(forward, p);
         ch.l_dirty()
             .solve_lower_triangular_unchecked_mut(&mut forward);
-        // One buffer for every size's solution and one for its product with the validation Gram: the
-        // product is `Gᵥ·w` as `*` computes it (`gemv`, α = 1, β = 0), without an allocation per size.
-        let mut w = DVector::zeros(forward.len());
-        let mut gw = DVector::zeros(forward.len());
+        let mut w = DVectorViewMut::from_slice(w, p);
+        let mut gw = DVectorViewMut::from_slice(gw, p);
         for (k, &m) in sizes.iter().enumerate() {
             let mut wm = w.rows_mut(0, m);
             wm.copy_from(&forward.rows(0, m));
@@ -364,6 +385,15 @@ impl Block {
 }
 
 pub(super) type Factor = Cholesky<f64, Dyn>;
+
+/// [`Block::solve_leading`]'s working vectors (the forward substitution, a solution, its product with the
+/// validation Gram), kept across its calls instead of three allocations per structure and α.
+#[derive(Default)]
+pub(super) struct Scratch {
+    forward: Vec<f64>,
+    w: Vec<f64>,
+    gw: Vec<f64>,
+}
 
 /// [`Block::factor`]s kept from one fit to the next on the same design: a factor depends on the features and
 /// α, not on the target, and `residual-ridge`'s rounds search the same structures on new residuals. Those the
@@ -474,23 +504,37 @@ fn raw_features(
     let c = input_mean.len();
     let rows = x.nrows();
     let mut f = DMatrix::<f64>::zeros(rows, p);
-    for r in 0..rows {
-        let z = |k: usize| (x[(r, k)] - input_mean[k]) / input_scale[k];
-        for k in 0..c {
-            let zk = z(k);
-            let mut v = zk;
-            for d in 0..max_degree {
-                f[(r, k * max_degree + d)] = v;
-                v *= zk;
-            }
+    // Column by column (contiguous): each power is the one before times the standardized input, row by row,
+    // the products a row-wise pass forms.
+    let z: Vec<Vec<f64>> = (0..c)
+        .map(|k| {
+            let (m, s) = (input_mean[k], input_scale[k]);
+            x.column(k).iter().map(|v| (v - m) / s).collect()
+        })
+        .collect();
+    let data = f.as_mut_slice();
+    for (k, zk) in z.iter().enumerate().filter(|_| max_degree > 0) {
+        let first = k * max_degree;
+        data[first * rows..(first + 1) * rows].copy_from_slice(zk);
+        for j in first + 1..first + max_degree {
+            let (before, after) = data.split_at_mut(j * rows);
+            let prev = &before[(j - 1) * rows..];
+            after[..rows]
+                .iter_mut()
+                .zip(prev)
+                .zip(zk)
+                .for_each(|((v, a), b)| *v = a * b);
         }
-        if cross {
-            let mut col = c * max_degree;
-            for a in 0..c {
-                for b in a + 1..c {
-                    f[(r, col)] = z(a) * z(b);
-                    col += 1;
-                }
+    }
+    if cross {
+        let mut col = c * max_degree;
+        for a in 0..c {
+            for b in a + 1..c {
+                data[col * rows..(col + 1) * rows]
+                    .iter_mut()
+                    .zip(z[a].iter().zip(&z[b]))
+                    .for_each(|(v, (za, zb))| *v = za * zb);
+                col += 1;
             }
         }
     }

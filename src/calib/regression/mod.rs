@@ -23,7 +23,7 @@ use nalgebra::{DMatrix, DVector, DVectorView};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use design::{Block, Design, Factor, FactorSource, Factors, SharedFactors, Target, build};
+use design::{Block, Design, Factor, FactorSource, Factors, Scratch, SharedFactors, Target, build};
 pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
 pub use stats::r2;
 
@@ -373,6 +373,7 @@ fn fit_structures(
     mut factors: FactorSource,
 ) -> Vec<RidgeFit> {
     let mut fitted = Vec::new();
+    let scratch = &mut Scratch::default();
     for degree in 1..=design.max_degree {
         // The feature count grows with k: the structures `n` points can fit are the first few.
         let idx: Vec<Vec<usize>> = (1..=order.len())
@@ -399,14 +400,21 @@ fn fit_structures(
             }
             _ => None,
         };
-        // α descending, strict improvement: equal scores keep the stronger penalty.
-        let mut best: Vec<Option<(f64, DVector<f64>, f64)>> = vec![None; sizes.len()];
+        // α descending, strict improvement: equal scores keep the stronger penalty. Each size's best so far
+        // (α, coefficients, SSE) in a buffer of its own, overwritten where a later α beats it.
+        let mut best: Vec<(f64, DVector<f64>, f64)> = sizes
+            .iter()
+            .map(|&m| (f64::NAN, DVector::zeros(m), f64::NAN))
+            .collect();
+        let mut found = vec![false; sizes.len()];
         for (a, &alpha) in alphas.iter().enumerate() {
-            // A solution is copied out only where it beats the best so far.
             let mut keep = |k: usize, w: DVectorView<f64>, sse: f64| {
                 let b = &mut best[k];
-                if b.as_ref().is_none_or(|b| sse < b.2) {
-                    *b = Some((alpha, w.into_owned(), sse));
+                if !found[k] || sse < b.2 {
+                    b.0 = alpha;
+                    b.1.copy_from(&w);
+                    b.2 = sse;
+                    found[k] = true;
                 }
             };
             if nested {
@@ -418,7 +426,7 @@ fn fit_structures(
                         own.as_ref()
                     }
                 };
-                blocks[0].solve_leading(target, alpha, &sizes, factor, keep);
+                blocks[0].solve_leading(target, alpha, &sizes, factor, scratch, keep);
             } else {
                 for (k, b) in blocks.iter().enumerate() {
                     let (w, sse) = b.solve(target, alpha);
@@ -426,8 +434,8 @@ fn fit_structures(
                 }
             }
         }
-        for (k, (b, size)) in best.into_iter().zip(sizes).enumerate() {
-            let (alpha, w, sse) = b.expect("alphas is non-empty");
+        assert!(found.iter().all(|&f| f), "alphas is non-empty");
+        for (k, ((alpha, w, sse), size)) in best.into_iter().zip(sizes).enumerate() {
             fitted.push(RidgeFit {
                 inputs: order[..=k].to_vec(),
                 degree,
@@ -716,6 +724,7 @@ mod tests {
                     alpha,
                     &sizes,
                     block.factor(alpha).as_ref(),
+                    &mut Scratch::default(),
                     |_, w, sse| leading.push((w.into_owned(), sse)),
                 );
                 for (k, (w, sse)) in leading.iter().enumerate() {
