@@ -141,12 +141,14 @@ impl Method for Kinematic {
     }
 
     fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
-        Ok(Box::new(KinematicModel::fit(
-            self.elastic,
-            ctx,
-            train,
-            val,
-        )?))
+        // Fitted once for a campaign's runs that share them: this method and the hybrid built on it (its base
+        // fit is this fit, on the same sets). An error is not shared: the fit meets it again.
+        let fit = || KinematicModel::fit(self.elastic, ctx, train, val);
+        let model = match &*ctx.shared(self.info().name, train, val, fit) {
+            Ok(model) => model.clone(),
+            Err(_) => fit()?,
+        };
+        Ok(Box::new(model))
     }
 }
 
