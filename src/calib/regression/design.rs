@@ -504,37 +504,23 @@ fn raw_features(
     let c = input_mean.len();
     let rows = x.nrows();
     let mut f = DMatrix::<f64>::zeros(rows, p);
-    // Column by column (contiguous): each power is the one before times the standardized input, row by row,
-    // the products a row-wise pass forms.
-    let z: Vec<Vec<f64>> = (0..c)
-        .map(|k| {
-            let (m, s) = (input_mean[k], input_scale[k]);
-            x.column(k).iter().map(|v| (v - m) / s).collect()
-        })
-        .collect();
-    let data = f.as_mut_slice();
-    for (k, zk) in z.iter().enumerate().filter(|_| max_degree > 0) {
-        let first = k * max_degree;
-        data[first * rows..(first + 1) * rows].copy_from_slice(zk);
-        for j in first + 1..first + max_degree {
-            let (before, after) = data.split_at_mut(j * rows);
-            let prev = &before[(j - 1) * rows..];
-            after[..rows]
-                .iter_mut()
-                .zip(prev)
-                .zip(zk)
-                .for_each(|((v, a), b)| *v = a * b);
+    for r in 0..rows {
+        let z = |k: usize| (x[(r, k)] - input_mean[k]) / input_scale[k];
+        for k in 0..c {
+            let zk = z(k);
+            let mut v = zk;
+            for d in 0..max_degree {
+                f[(r, k * max_degree + d)] = v;
+                v *= zk;
+            }
         }
-    }
-    if cross {
-        let mut col = c * max_degree;
-        for a in 0..c {
-            for b in a + 1..c {
-                data[col * rows..(col + 1) * rows]
-                    .iter_mut()
-                    .zip(z[a].iter().zip(&z[b]))
-                    .for_each(|(v, (za, zb))| *v = za * zb);
-                col += 1;
+        if cross {
+            let mut col = c * max_degree;
+            for a in 0..c {
+                for b in a + 1..c {
+                    f[(r, col)] = z(a) * z(b);
+                    col += 1;
+                }
             }
         }
     }
