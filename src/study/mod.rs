@@ -18,6 +18,7 @@ pub use crate::eval::judge::DistanceBand;
 use crate::world::WorldConfig;
 
 pub mod config;
+mod jobs;
 pub mod limits;
 mod measure;
 mod progress;

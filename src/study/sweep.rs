@@ -19,6 +19,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
+use super::jobs::{Job, jobs, longest_first};
 use super::measure::{
     Measure, Prepared, TEST_SET, campaign_seed, layout_index, region_truth, split,
 };
@@ -51,15 +52,6 @@ struct RegionSets {
     /// The oracle's predictions on the grid: the true robot's, the same for every campaign's oracle.
     oracle_grid: Option<Vec<Point3<f64>>>,
     limits: super::Limits,
-}
-
-/// One campaign of the sweep: indices into the scenario's regions and the study's lists.
-#[derive(Clone, Copy)]
-struct Job {
-    region: usize,
-    layout: usize,
-    size: usize,
-    seed: u64,
 }
 
 /// What the runs of one job give: (method index, metrics), and the detail when this job may be shown.
@@ -288,43 +280,6 @@ fn region_sets(measure: &Measure, config: &StudyConfig) -> Result<Vec<RegionSets
             })
         })
         .collect()
-}
-
-/// Every campaign of the study in config order (region, layout, size, seed), those `shard` holds with their
-/// indices, and how many there are in all.
-fn jobs(regions: usize, config: &StudyConfig, shard: Shard) -> (Vec<usize>, Vec<Job>, usize) {
-    let mut jobs = Vec::new();
-    for region in 0..regions {
-        for layout in 0..config.layouts.len() {
-            for size in 0..config.sizes.len() {
-                for seed in 0..config.seeds {
-                    jobs.push(Job {
-                        region,
-                        layout,
-                        size,
-                        seed,
-                    });
-                }
-            }
-        }
-    }
-    let total = jobs.len();
-    let (held, jobs) = jobs
-        .into_iter()
-        .enumerate()
-        .filter(|(i, _)| shard.holds(*i))
-        .unzip();
-    (held, jobs, total)
-}
-
-/// Orders `jobs` to be started largest first: the campaigns of the most points, a model-based layout's (a
-/// selection and one campaign per design) before a fixed one's. In config order the largest came last and the
-/// pool ran on one thread through the last of them (a tenth of the default study's wall time); the runs are put
-/// back in config order after ([`in_config_order`]), so no output depends on it.
-fn longest_first(jobs: &mut [Job], config: &StudyConfig) {
-    jobs.sort_by_key(|j| {
-        std::cmp::Reverse((config.sizes[j.size], config.layouts[j.layout].selects()))
-    });
 }
 
 /// The runs of every job in config order (region, layout, method, size, seed), and the detail: the job's at the
