@@ -392,9 +392,11 @@ pub trait Fitted: Any + Send + Sync {
         let rows = if rotation.is_some() { 6 } else { 3 };
         let mut q = seed.to_vec();
         let mut err = f64::INFINITY;
+        // The rows' fixed rotations once for every iteration's pass (the same links, bit for bit).
+        let fixed = self.dh().fixed_rotations();
         for _ in 0..20 {
             // One pass over the nominal chain for the prediction and the Jacobian.
-            let pose = self.dh().pose(&q);
+            let pose = self.dh().pose_fixed(&q, &fixed);
             let (position, orientation) = self.point_at(&pose, inputs);
             if !numeric::all_finite(position.coords.iter().chain(orientation.coords.iter())) {
                 return Err(Error::Invalid(format!(

@@ -337,6 +337,7 @@ mod tests {
             extra_input_means: Vec::new(),
             position: Vec::new(),
             orientation: Vec::new(),
+            features: Default::default(),
         };
         let order = |text: &str, keys: &[&str]| {
             let at: Vec<usize> = keys

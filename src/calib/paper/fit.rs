@@ -135,6 +135,8 @@ impl PaperModel {
             &id_train.orientation,
             &id_val.orientation,
         )?;
+        // Shared features of the models just set, not of any prediction made without them.
+        model.features = Default::default();
         Ok(model)
     }
 
@@ -190,6 +192,7 @@ impl PaperModel {
             extra_input_means,
             position: Vec::new(),
             orientation: Vec::new(),
+            features: Default::default(),
         })
     }
 

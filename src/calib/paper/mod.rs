@@ -13,6 +13,8 @@
 mod eq13;
 mod fit;
 
+use std::sync::OnceLock;
+
 use nalgebra::{DVector, Isometry3, Point3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -22,7 +24,7 @@ use super::error_model::{
     flange_pose_with_errors_on, frame_errors,
 };
 use super::method::{Basis, FitContext, Fitted, Method, MethodInfo, Prediction, RobotParameters};
-use super::regression::{RidgeModel, r2};
+use super::regression::{RidgeModel, SharedFeatures, r2};
 use super::tracker_frame::Observation;
 use crate::dataset::Dataset;
 use crate::error::Result;
@@ -131,6 +133,11 @@ pub struct PaperModel {
     pub extra_input_means: Vec<f64>,
     pub position: Vec<ParameterModel>,
     pub orientation: Vec<ParameterModel>,
+    /// The parameter models' features, each computed once a point ([`SharedFeatures`]): built at the first
+    /// prediction with the models `position` and `orientation` hold then (a fit sets them before it predicts,
+    /// a file before any prediction).
+    #[serde(skip)]
+    pub(crate) features: OnceLock<Option<SharedFeatures>>,
 }
 
 impl PaperModel {
@@ -264,19 +271,38 @@ impl PaperModel {
         }
         let w = self.basis.domain.weight(q, inputs);
         let x = self.candidates_at(q, inputs, flange);
-        // Weight 1 leaves the bits alone.
-        let eval = |models: &[ParameterModel]| {
-            models
+        let models = || {
+            self.position
                 .iter()
-                .map(|m| match w {
-                    1.0 => m.model.predict(&x),
-                    // Toward the regression's constant part (its intercept, the training mean): the
-                    // model's constant-parameter calibration.
-                    _ => m.model.intercept + w * (m.model.predict(&x) - m.model.intercept),
-                })
-                .collect()
+                .chain(&self.orientation)
+                .map(|m| &m.model)
         };
-        (eval(&self.position), eval(&self.orientation))
+        let predicted = match self.shared_features() {
+            Some(shared) => shared.predict(&x),
+            None => models().map(|m| m.predict(&x)).collect(),
+        };
+        let mut position: Vec<f64> = predicted
+            .into_iter()
+            .zip(models())
+            .map(|(p, m)| match w {
+                // Weight 1 leaves the bits alone.
+                1.0 => p,
+                // Toward the regression's constant part (its intercept, the training mean): the model's
+                // constant-parameter calibration.
+                _ => m.intercept + w * (p - m.intercept),
+            })
+            .collect();
+        let orientation = position.split_off(self.position.len());
+        (position, orientation)
+    }
+
+    /// The parameter models' [`SharedFeatures`], position then orientation, where they hold every model.
+    fn shared_features(&self) -> Option<&SharedFeatures> {
+        let models = self.position.iter().chain(&self.orientation);
+        self.features
+            .get_or_init(|| SharedFeatures::of(models.clone().map(|m| &m.model)))
+            .as_ref()
+            .filter(|shared| shared.len() == models.count())
     }
 
     fn frame_errors_of(&self, models: &[ParameterModel], values: &[f64]) -> FrameErrors {

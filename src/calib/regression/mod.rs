@@ -15,6 +15,7 @@
 
 mod design;
 mod model;
+mod shared;
 mod stats;
 
 use std::sync::{Arc, Mutex, PoisonError};
@@ -25,6 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use design::{Block, Design, Factor, FactorSource, Factors, Scratch, SharedFactors, Target, build};
 pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
+pub use shared::SharedFeatures;
 pub use stats::r2;
 
 /// Search space of [`fit_all`].
