@@ -84,12 +84,13 @@ pub(super) fn structural_analysis(problem: &Problem, candidates: &[Param]) -> Ve
             continue;
         }
         let mut v = j.column(c) / norms[c];
-        // Twice is enough (Kahan–Parlett) for the orthogonality the threshold needs.
-        for _ in 0..2 {
-            for b in &basis {
-                let d = b.dot(&v);
-                v.axpy(-d, b, 1.0);
-            }
+        // Modified Gram–Schmidt, one pass: a column in the span of the kept ones leaves a rest of rounding
+        // times their condition (≤ 9e-14 on the iiwa, asserted below 1e-10 by
+        // `structural_decisions_are_clear_cut`), far below `STRUCT_REL`; a second pass would only refine
+        // rests that lie on one side of the threshold by orders of magnitude already.
+        for b in &basis {
+            let d = b.dot(&v);
+            v.axpy(-d, b, 1.0);
         }
         let rest = v.norm();
         let kept = rest >= STRUCT_REL;
