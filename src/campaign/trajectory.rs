@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
 use crate::robot::{Frames, JointRates, forward_kinematics};
-use crate::truth::{MotionSample, PathPoint};
+use crate::truth::{Command, MotionSample, PathPoint};
 use crate::world::World;
 
 /// The most samples a trajectory campaign keeps: the same bound as a region's point count.
@@ -42,22 +42,51 @@ struct Segment {
     v1: Vec<f64>,
 }
 
+/// The quintic Hermite basis at `s` ∈ [0, 1] of a segment, and its first and second derivatives: the same for
+/// every joint, so computed once per sample.
+struct Basis {
+    h: [f64; 4],
+    d: [f64; 3],
+    dd: [f64; 3],
+}
+
+impl Basis {
+    fn at(s: f64) -> Basis {
+        let (s2, s3, s4, s5) = (s * s, s * s * s, s.powi(4), s.powi(5));
+        Basis {
+            h: [
+                1.0 - 10.0 * s3 + 15.0 * s4 - 6.0 * s5,
+                s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5,
+                -4.0 * s3 + 7.0 * s4 - 3.0 * s5,
+                10.0 * s3 - 15.0 * s4 + 6.0 * s5,
+            ],
+            d: [
+                -30.0 * s2 + 60.0 * s3 - 30.0 * s4,
+                1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4,
+                -12.0 * s2 + 28.0 * s3 - 15.0 * s4,
+            ],
+            dd: [
+                -60.0 * s + 180.0 * s2 - 120.0 * s3,
+                -36.0 * s + 96.0 * s2 - 60.0 * s3,
+                -24.0 * s + 84.0 * s2 - 60.0 * s3,
+            ],
+        }
+    }
+}
+
 impl Segment {
     /// Angle, velocity and acceleration of joint `j` at `s` ∈ [0, 1] of the segment.
     fn eval(&self, j: usize, s: f64) -> (f64, f64, f64) {
-        let (s2, s3, s4, s5) = (s * s, s * s * s, s.powi(4), s.powi(5));
+        self.eval_with(j, &Basis::at(s))
+    }
+
+    /// [`Segment::eval`] with the basis at its `s`.
+    fn eval_with(&self, j: usize, b: &Basis) -> (f64, f64, f64) {
         let t = self.duration;
         let (p0, p1, v0, v1) = (self.q0[j], self.q1[j], self.v0[j], self.v1[j]);
-        let h0 = 1.0 - 10.0 * s3 + 15.0 * s4 - 6.0 * s5;
-        let h1 = s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5;
-        let h4 = -4.0 * s3 + 7.0 * s4 - 3.0 * s5;
-        let h5 = 10.0 * s3 - 15.0 * s4 + 6.0 * s5;
-        let d0 = -30.0 * s2 + 60.0 * s3 - 30.0 * s4;
-        let d1 = 1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4;
-        let d4 = -12.0 * s2 + 28.0 * s3 - 15.0 * s4;
-        let dd0 = -60.0 * s + 180.0 * s2 - 120.0 * s3;
-        let dd1 = -36.0 * s + 96.0 * s2 - 60.0 * s3;
-        let dd4 = -24.0 * s + 84.0 * s2 - 60.0 * s3;
+        let [h0, h1, h4, h5] = b.h;
+        let [d0, d1, d4] = b.d;
+        let [dd0, dd1, dd4] = b.dd;
         (
             p0 * h0 + p1 * h5 + t * (v0 * h1 + v1 * h4),
             (p1 - p0) * (-d0) / t + v0 * d1 + v1 * d4,
@@ -167,16 +196,28 @@ impl Path {
 
     /// The commanded sample at time `t` (clamped to the path).
     pub fn at(&self, t: f64) -> PathPoint {
+        let mut p = PathPoint::default();
+        self.sample(t, &mut p);
+        p
+    }
+}
+
+impl Command for Path {
+    /// [`Path::at`] into `out`'s vectors.
+    fn sample(&self, t: f64, out: &mut PathPoint) {
         let t = t.clamp(0.0, self.duration());
         let k = self.segment(t);
         let seg = &self.segments[k];
         let s = ((t - seg.start) / seg.duration).clamp(0.0, 1.0);
         let n = seg.q0.len();
-        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        for j in 0..n {
-            (q[j], qd[j], qdd[j]) = seg.eval(j, s);
+        let basis = Basis::at(s);
+        out.t = t;
+        for v in [&mut out.q, &mut out.qd, &mut out.qdd] {
+            v.resize(n, 0.0);
         }
-        PathPoint { t, q, qd, qdd }
+        for j in 0..n {
+            (out.q[j], out.qd[j], out.qdd[j]) = seg.eval_with(j, &basis);
+        }
     }
 }
 
@@ -208,9 +249,7 @@ pub fn measure(
     let stamps = tracker_stamps(path.duration(), config)?;
     let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
     let truth_times = arm_times(&stamps, config, &mut rng)?;
-    let moved = world
-        .robot
-        .follow(&|t| path.at(t), &truth_times, Some(&mut rng))?;
+    let moved = world.robot.follow(&path, &truth_times, Some(&mut rng))?;
     let recorded = record(world, planned, &path, &stamps, &moved, &mut rng);
     if recorded.campaign.points.is_empty() {
         return Err(Error::Invalid(format!(

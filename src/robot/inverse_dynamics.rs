@@ -7,7 +7,7 @@
 //! hold the arm, of the opposite sign to what gravity applies. Gravity enters as an upward acceleration of the
 //! base (the usual trick), so one pass gives the inertial and the gravity terms together.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::chain::{Chain, JointKind, Payload};
 use super::kinematics::Frames;
@@ -22,11 +22,15 @@ pub struct Workspace {
     force: Vec<Vector3<f64>>,
     /// Moment about the body's centre of mass.
     moment: Vec<Vector3<f64>>,
-    /// Each joint's axis and anchor and each body's centre of mass (world): the backward pass reads what the
-    /// forward one computed.
+    /// The geometry of the frames of the last [`inverse_dynamics`] call, which [`inverse_dynamics_again`]
+    /// reuses: each joint's axis and anchor, each body's centre of mass, its offset from the body's origin and
+    /// its inertia (world), the payload's centre of mass.
     axis: Vec<Vector3<f64>>,
     anchor: Vec<Vector3<f64>>,
     com: Vec<Vector3<f64>>,
+    com_offset: Vec<Vector3<f64>>,
+    inertia: Vec<Matrix3<f64>>,
+    payload_com: Vector3<f64>,
 }
 
 impl Workspace {
@@ -41,6 +45,9 @@ impl Workspace {
             axis: vec![Vector3::zeros(); n],
             anchor: vec![Vector3::zeros(); n],
             com: vec![Vector3::zeros(); n],
+            com_offset: vec![Vector3::zeros(); n],
+            inertia: vec![Matrix3::zeros(); n],
+            payload_com: Vector3::zeros(),
         }
     }
 }
@@ -79,6 +86,60 @@ pub fn inverse_dynamics(
     ws: &mut Workspace,
     out: &mut [f64],
 ) {
+    geometry(chain, frames, payload, ws);
+    recurse(chain, frames, payload, gravity, qd, qdd, ws, out);
+}
+
+/// [`inverse_dynamics`] on the same `frames` (and chain and payload) as the last call with `ws`, at other rates
+/// or gravity: the world axes, centres of mass and inertias are that call's, the arithmetic the same (a
+/// linearisation's columns, a dozen passes on one posture).
+#[allow(clippy::too_many_arguments)]
+pub fn inverse_dynamics_again(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    qd: &[f64],
+    qdd: &[f64],
+    ws: &mut Workspace,
+    out: &mut [f64],
+) {
+    recurse(chain, frames, payload, gravity, qd, qdd, ws, out);
+}
+
+/// What the passes read of `frames` alone, into `ws`.
+fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
+    let n = chain.dof();
+    for i in 0..n {
+        ws.axis[i] = frames.axis(chain, i);
+        ws.anchor[i] = frames.anchor(i).coords;
+    }
+    for b in 1..=n {
+        let body = &chain.bodies[b];
+        let frame = &frames.body[b];
+        let com = frame * body.inertial.com;
+        ws.com[b] = com.coords;
+        ws.com_offset[b] = com.coords - frame.translation.vector;
+        let rot = frame.rotation.to_rotation_matrix();
+        ws.inertia[b] = rot.matrix() * body.inertial.inertia * rot.matrix().transpose();
+    }
+    if payload.mass > 0.0 {
+        ws.payload_com = (frames.flange * Point3::from(payload.com)).coords;
+    }
+}
+
+/// The Newton–Euler recursion of [`inverse_dynamics`] on the geometry in `ws`.
+#[allow(clippy::too_many_arguments)]
+fn recurse(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    qd: &[f64],
+    qdd: &[f64],
+    ws: &mut Workspace,
+    out: &mut [f64],
+) {
     let n = chain.dof();
     assert!(
         qd.len() == n && qdd.len() == n && out.len() == n,
@@ -89,9 +150,7 @@ pub fn inverse_dynamics(
     ws.alpha[0] = Vector3::zeros();
     ws.accel[0] = -gravity;
     for i in 0..n {
-        let axis = frames.axis(chain, i);
-        let anchor = frames.anchor(i).coords;
-        (ws.axis[i], ws.anchor[i]) = (axis, anchor);
+        let (axis, anchor) = (ws.axis[i], ws.anchor[i]);
         let parent_origin = frames.body[i].translation.vector;
         let origin = frames.body[i + 1].translation.vector;
         let (w, al, a) = (ws.omega[i], ws.alpha[i], ws.accel[i]);
@@ -118,15 +177,9 @@ pub fn inverse_dynamics(
     }
     // Per body: the force and the moment about its centre of mass that move it.
     for b in 1..=n {
-        let body = &chain.bodies[b];
-        let frame = &frames.body[b];
-        let m = body.inertial.mass;
-        let com = frame * body.inertial.com;
-        ws.com[b] = com.coords;
-        let r = com.coords - frame.translation.vector;
-        let a_com = point_accel(&ws.accel[b], &ws.omega[b], &ws.alpha[b], &r);
-        let rot = frame.rotation.to_rotation_matrix();
-        let inertia = rot.matrix() * body.inertial.inertia * rot.matrix().transpose();
+        let m = chain.bodies[b].inertial.mass;
+        let a_com = point_accel(&ws.accel[b], &ws.omega[b], &ws.alpha[b], &ws.com_offset[b]);
+        let inertia = &ws.inertia[b];
         let w = ws.omega[b];
         ws.force[b] = a_com * m;
         ws.moment[b] = inertia * ws.alpha[b] + w.cross(&(inertia * w));
@@ -136,17 +189,17 @@ pub fn inverse_dynamics(
     let mut n_about_origin = Vector3::zeros();
     let mut reduced_at = frames.flange.translation.vector;
     if payload.mass > 0.0 {
-        let p = frames.flange * Point3::from(payload.com);
+        let p = ws.payload_com;
         let last = n;
         let origin = frames.body[last].translation.vector;
         let a = point_accel(
             &ws.accel[last],
             &ws.omega[last],
             &ws.alpha[last],
-            &(p.coords - origin),
+            &(p - origin),
         );
         f = a * payload.mass;
-        reduced_at = p.coords;
+        reduced_at = p;
     }
     for i in (0..n).rev() {
         let b = i + 1;

@@ -1,5 +1,7 @@
 //! The true robot: what the real arm has and the controller does not know.
+pub mod command;
 pub mod history;
+mod lu;
 pub mod motion;
 pub mod perturbation;
 pub mod physics;
@@ -8,8 +10,9 @@ pub mod robot;
 pub mod stiffness;
 pub mod thermal;
 
+pub use command::{Command, PathPoint};
 pub use history::Visit;
-pub use motion::{MotionSample, PathPoint};
+pub use motion::MotionSample;
 pub use perturbation::{DeflectionSolver, ErrorModel, KnownGeometry, Offset, Perturbation};
 pub use robot::{TrueRobot, TrueState};
 pub use thermal::ThermalProfile;

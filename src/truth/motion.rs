@@ -35,11 +35,13 @@ use std::collections::VecDeque;
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 use rand_chacha::ChaCha8Rng;
 
+use super::command::{Command, PathPoint};
 use super::history::Visit;
+use super::lu::lu_solve_in_place;
 use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
-use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
+use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics, inverse_dynamics_again};
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
@@ -76,16 +78,6 @@ pub const RELINEARIZE_S: f64 = KNOT_S * RELINEARIZE_KNOTS as f64;
 /// inertia (≲ 1e-3 s²) a miss of this size is ≲ 1e-9 rad of δ_s.
 pub const ACCELERATION_TOL: f64 = 1e-6;
 
-/// One commanded sample of a joint-space path: time (s), angles (rad), velocities (rad/s), accelerations
-/// (rad/s²), controller coordinates.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PathPoint {
-    pub t: f64,
-    pub q: Vec<f64>,
-    pub qd: Vec<f64>,
-    pub qdd: Vec<f64>,
-}
-
 /// Where the true arm is at one path sample.
 #[derive(Clone, Debug)]
 pub struct MotionSample {
@@ -117,11 +109,13 @@ struct Remainder {
     scratch: Scratch,
 }
 
-/// Buffers of one trapezoidal step: two vectors and the step's matrix.
+/// Buffers of one trapezoidal step: three vectors, the step's matrix (factored in place) and its pivots.
 struct Scratch {
     x: DVector<f64>,
     product: DVector<f64>,
+    rhs: DVector<f64>,
     matrix: DMatrix<f64>,
+    pivots: Vec<(usize, usize)>,
 }
 
 /// One exact quasi-static solve on the grid of [`KNOT_S`].
@@ -148,6 +142,10 @@ struct Grid {
     next: Option<i64>,
     /// The linearisations (knot index, matrices) from the last at or before the current node on.
     linear: VecDeque<(i64, Linear)>,
+    /// Knots dropped behind the walk, their vectors reused by the next solves.
+    spare: Vec<Knot>,
+    /// The command at the knot being solved.
+    point: PathPoint,
 }
 
 /// The settled arm at a sample, before repeatability noise.
@@ -164,7 +162,7 @@ impl TrueRobot {
     /// repeatability noise is drawn from `noise`, sample by sample in the order of `times`, when given.
     pub fn follow(
         &self,
-        path: &dyn Fn(f64) -> PathPoint,
+        path: &dyn Command,
         times: &[f64],
         noise: Option<&mut ChaCha8Rng>,
     ) -> Result<Vec<MotionSample>> {
@@ -174,7 +172,7 @@ impl TrueRobot {
     /// [`TrueRobot::follow`] with the integration's longest step `step_s` (s).
     pub fn follow_stepped(
         &self,
-        path: &dyn Fn(f64) -> PathPoint,
+        path: &dyn Command,
         times: &[f64],
         step_s: f64,
         mut noise: Option<&mut ChaCha8Rng>,
@@ -239,40 +237,38 @@ impl TrueRobot {
         frames: &mut Frames,
     ) -> Linear {
         let n = self.chain.dof();
-        let torque = |frames: &Frames,
-                      gravity: &Vector3<f64>,
-                      qd: &[f64],
-                      qdd: &[f64],
-                      ws: &mut Workspace,
-                      out: &mut [f64]| {
-            inverse_dynamics(
-                &self.chain,
-                frames,
-                &self.payload,
-                gravity,
-                qd,
-                qdd,
-                ws,
-                out,
-            );
-        };
         let zero = vec![0.0; n];
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
         let (mut base, mut ahead) = (vec![0.0; n], vec![0.0; n]);
-        torque(&state.frames, &self.gravity, qd, qdd, ws, &mut base);
+        let (chain, payload, gravity) = (&self.chain, &self.payload, &self.gravity);
+        inverse_dynamics(
+            chain,
+            &state.frames,
+            payload,
+            gravity,
+            qd,
+            qdd,
+            ws,
+            &mut base,
+        );
         // Forward differences: their error (a step's share of the curvature) is a millionth of the sensitivity,
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
         const ANGLE: f64 = 1e-6;
         let (mut unit, mut faster, mut q) = (zero.clone(), qd.to_vec(), state.q.clone());
+        // M and C on the state's frames first, each pass reusing the base pass's geometry; then S, whose passes
+        // each have frames of their own.
         for j in 0..n {
             unit.fill(0.0);
             unit[j] = 1.0;
-            torque(
+            let none = Vector3::zeros();
+            inverse_dynamics_again(
+                chain,
                 &state.frames,
-                &Vector3::zeros(),
+                payload,
+                &none,
                 &zero,
                 &unit,
                 ws,
@@ -281,14 +277,25 @@ impl TrueRobot {
             m.column_mut(j).copy_from_slice(&ahead);
             faster.copy_from_slice(qd);
             faster[j] += RATE;
-            torque(&state.frames, &self.gravity, &faster, qdd, ws, &mut ahead);
+            inverse_dynamics_again(
+                chain,
+                &state.frames,
+                payload,
+                gravity,
+                &faster,
+                qdd,
+                ws,
+                &mut ahead,
+            );
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 c[(i, j)] = (a - b) / RATE;
             }
+        }
+        for j in 0..n {
             q.copy_from_slice(&state.q);
             q[j] += ANGLE;
             self.kinematics(&q, &state.tilt, state.scale, frames);
-            torque(frames, &self.gravity, qd, qdd, ws, &mut ahead);
+            inverse_dynamics(chain, frames, payload, gravity, qd, qdd, ws, &mut ahead);
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 s[(i, j)] = (a - b) / ANGLE;
             }
@@ -304,7 +311,7 @@ impl TrueRobot {
 /// The walk along the path, node by node in time order.
 struct Walk<'a> {
     robot: &'a TrueRobot,
-    path: &'a dyn Fn(f64) -> PathPoint,
+    path: &'a dyn Command,
     damping: &'a [f64],
     /// The quasi-static solve at the last node solved exactly.
     state: TrueState,
@@ -321,20 +328,22 @@ struct Walk<'a> {
     accel: Vec<f64>,
     /// The linearisation at the current node, interpolated between the grid's.
     linear: Linear,
+    /// The command at the current node.
+    point: PathPoint,
     ws: Workspace,
     frames: Frames,
 }
 
-/// The command at `t`, checked against the robot's joint count.
-fn command(path: &dyn Fn(f64) -> PathPoint, n: usize, t: f64) -> Result<PathPoint> {
-    let p = path(t);
+/// The command at `t` into `p`, checked against the robot's joint count.
+fn command(path: &dyn Command, n: usize, t: f64, p: &mut PathPoint) -> Result<()> {
+    path.sample(t, p);
     if p.q.len() != n || p.qd.len() != n || p.qdd.len() != n {
         return Err(Error::Invalid(format!(
             "motion: the path gives {} angles at t = {t} s, the robot has {n} joints",
             p.q.len()
         )));
     }
-    Ok(p)
+    Ok(())
 }
 
 /// The links' temperature at time `t` (s), the unloaded angles at the command `p` and the link lengths: where
@@ -359,11 +368,7 @@ fn turn(visit: &mut Visit, qd: &[f64]) {
 }
 
 impl Walk<'_> {
-    fn new<'a>(
-        robot: &'a TrueRobot,
-        path: &'a dyn Fn(f64) -> PathPoint,
-        damping: &'a [f64],
-    ) -> Walk<'a> {
+    fn new<'a>(robot: &'a TrueRobot, path: &'a dyn Command, damping: &'a [f64]) -> Walk<'a> {
         let n = robot.chain.dof();
         let visit = || Visit {
             direction: vec![1.0; n],
@@ -383,6 +388,8 @@ impl Walk<'_> {
                 knots: VecDeque::new(),
                 next: None,
                 linear: VecDeque::new(),
+                spare: Vec::new(),
+                point: PathPoint::default(),
             },
             remainder: None,
             quasi_static: DVector::zeros(n),
@@ -393,6 +400,7 @@ impl Walk<'_> {
                 c: zeros(),
                 s: zeros(),
             },
+            point: PathPoint::default(),
             ws: Workspace::new(&robot.chain),
             frames: Frames::new(&robot.chain),
         }
@@ -403,7 +411,9 @@ impl Walk<'_> {
     fn advance(&mut self, t: f64, exact: bool) -> Result<()> {
         let robot = self.robot;
         let n = robot.chain.dof();
-        let p = command(self.path, n, t)?;
+        // Out of `self` while the grid is solved; put back below for the next node's reuse.
+        let mut p = std::mem::take(&mut self.point);
+        command(self.path, n, t, &mut p)?;
         turn(&mut self.visit, &p.qd);
         let here = (t / KNOT_S).floor() as i64;
         self.solve_through(here)?;
@@ -432,12 +442,15 @@ impl Walk<'_> {
                     scratch: Scratch {
                         x: DVector::zeros(n),
                         product: DVector::zeros(n),
+                        rhs: DVector::zeros(n),
                         matrix: DMatrix::zeros(n, n),
+                        pivots: Vec::with_capacity(n),
                     },
                 });
             }
             Some(r) => r.step(t, &self.quasi_static, &self.linear)?,
         }
+        self.point = p;
         Ok(())
     }
 
@@ -454,7 +467,7 @@ impl Walk<'_> {
         }
         let grid = &mut self.grid;
         while grid.knots.front().is_some_and(|k| k.index < here - 1) {
-            grid.knots.pop_front();
+            grid.spare.extend(grid.knots.pop_front());
         }
         while grid.linear.get(1).is_some_and(|l| l.0 <= linear_here) {
             grid.linear.pop_front();
@@ -468,11 +481,12 @@ impl Walk<'_> {
         let robot = self.robot;
         let n = robot.chain.dof();
         let t = index as f64 * KNOT_S;
-        let p = command(self.path, n, t)?;
         let grid = &mut self.grid;
+        command(self.path, n, t, &mut grid.point)?;
+        let p = &grid.point;
         turn(&mut grid.visit, &p.qd);
         let state = &mut grid.state;
-        unload(robot, t, &p, &mut grid.visit, state);
+        unload(robot, t, p, &mut grid.visit, state);
         let motion = Some((&p.qd[..], &p.qdd[..]));
         let mut behind = grid.knots.iter().rev();
         match (behind.next(), behind.next()) {
@@ -488,11 +502,30 @@ impl Walk<'_> {
                 robot.deflect_moving(state, motion)?;
             }
         }
-        let quasi_static =
-            DVector::from_iterator(n, state.q0.iter().zip(&state.q).map(|(q0, q)| q0 - q));
-        let slopes = (0..n)
-            .map(|i| robot.tangent_stiffness(i, state.tau()[i]))
-            .collect();
+        let mut knot = grid.spare.pop().unwrap_or_else(|| Knot {
+            index,
+            quasi_static: DVector::zeros(n),
+            tilt: Vec::new(),
+            direction: Vec::new(),
+            slopes: Vec::new(),
+            qdd: Vec::new(),
+        });
+        knot.index = index;
+        for ((d, q0), q) in knot.quasi_static.iter_mut().zip(&state.q0).zip(&state.q) {
+            *d = q0 - q;
+        }
+        knot.slopes.clear();
+        knot.slopes
+            .extend((0..n).map(|i| robot.tangent_stiffness(i, state.tau()[i])));
+        for (to, from) in [
+            (&mut knot.direction, &grid.visit.direction),
+            (&mut knot.qdd, &p.qdd),
+        ] {
+            to.clear();
+            to.extend_from_slice(from);
+        }
+        knot.tilt.clear();
+        knot.tilt.extend_from_slice(&state.tilt);
         if index.rem_euclid(RELINEARIZE_KNOTS) == 0 {
             let linear = robot.linearize(
                 state,
@@ -504,14 +537,7 @@ impl Walk<'_> {
             );
             grid.linear.push_back((index, linear));
         }
-        grid.knots.push_back(Knot {
-            index,
-            quasi_static,
-            tilt: state.tilt.clone(),
-            direction: grid.visit.direction.clone(),
-            slopes,
-            qdd: p.qdd,
-        });
+        grid.knots.push_back(knot);
         Ok(())
     }
 
@@ -611,44 +637,49 @@ impl Remainder {
     /// One trapezoidal (Newmark average-acceleration) step to time `t`, driven by `quasi_static` there.
     ///
     /// In place, in the order of the expressions `s δ + M (z a₀ + v 4/h + a) + C (z a₁ + v)` and
-    /// `S + C a₁ + M a₀` (each product whole before it is added): the bits of the allocating form, without its
-    /// dozen allocations per node.
+    /// `S + C a₁ + M a₀` (each product whole before it is added), the step's matrix factored where it lies:
+    /// the bits of the allocating form (nalgebra's product and LU), without an allocation per node.
     fn step(&mut self, t: f64, quasi_static: &DVector<f64>, linear: &Linear) -> Result<()> {
         let h = t - self.t;
         if h > 0.0 {
             let Linear { m, c, s } = linear;
-            let Scratch { x, product, matrix } = &mut self.scratch;
+            let Scratch {
+                x,
+                product,
+                rhs,
+                matrix,
+                pivots,
+            } = &mut self.scratch;
             let (a0, a1) = (4.0 / (h * h), 2.0 / h);
-            let mut rhs = s * quasi_static;
+            rhs.gemv(1.0, s, quasi_static, 0.0);
             x.copy_from(&self.z);
             *x *= a0;
             x.axpy(4.0 / h, &self.v, 1.0);
             *x += &self.a;
             product.gemv(1.0, m, x, 0.0);
-            rhs += &*product;
+            *rhs += &*product;
             x.copy_from(&self.z);
             *x *= a1;
             *x += &self.v;
             product.gemv(1.0, c, x, 0.0);
-            rhs += &*product;
+            *rhs += &*product;
             for (((out, s), c), m) in matrix.iter_mut().zip(s.iter()).zip(c.iter()).zip(m.iter()) {
                 *out = s + c * a1 + m * a0;
             }
-            if !matrix.clone().lu().solve_mut(&mut rhs) {
+            if !lu_solve_in_place(matrix.as_mut_slice(), rhs.as_mut_slice(), pivots) {
                 return Err(singular(t));
             }
-            let z = rhs;
-            for (((zi, old), v), a) in z
+            for (((zi, old), v), a) in rhs
                 .iter()
-                .zip(self.z.iter())
+                .zip(self.z.iter_mut())
                 .zip(self.v.iter_mut())
                 .zip(self.a.iter_mut())
             {
-                let d = zi - old;
+                let d = zi - *old;
                 *a = d * a0 - *v * (4.0 / h) - *a;
                 *v = d * a1 - *v;
+                *old = *zi;
             }
-            self.z = z;
             self.t = t;
         }
         Ok(())

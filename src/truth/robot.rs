@@ -9,7 +9,7 @@
 //! compliance times ‖∂τ/∂q‖ stays ≪ 1 for any real arm); [`super::physics`] is the rapier reference it is
 //! checked against.
 
-use nalgebra::{Isometry3, Matrix3, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
 use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
 use crate::robot::kinematics::forward_kinematics;
-use crate::robot::{Chain, Frames, Inertial, Payload};
+use crate::robot::{Chain, Frames, Inertial, JointKind, Payload};
 
 #[derive(Clone, Debug)]
 pub struct TrueRobot {
@@ -226,7 +226,10 @@ impl TrueRobot {
                 joint_frame *= UnitQuaternion::from_scaled_axis(tilt[i]);
             }
             frames.joint[i] = joint_frame;
-            pose = joint_frame * joint.motion(qi);
+            pose = match joint.kind {
+                JointKind::Revolute => turned(&joint_frame, &joint.motion(qi).rotation),
+                JointKind::Prismatic => joint_frame * joint.motion(qi),
+            };
             frames.body[i + 1] = pose;
         }
         let mut flange = chain.flange;
@@ -529,6 +532,17 @@ impl TrueRobot {
     }
 }
 
+/// `frame` times a pure rotation: nalgebra's isometry product bit for bit without its one wasted step. That
+/// product adds the rotated translation of the turn, here zero, and a finite quaternion rotates zero into an
+/// exact +0; the addition is kept (a −0 becomes +0 as there), the rotation dropped.
+#[inline]
+fn turned(frame: &Isometry3<f64>, rotation: &UnitQuaternion<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(frame.translation.vector + Vector3::zeros()),
+        frame.rotation * rotation,
+    )
+}
+
 /// The true inertial of every moving link: the URDF's with its mass scaled and centre of mass moved by the
 /// perturbation, plus the cable along the link (from the link's frame to the next joint, or to the flange)
 /// as a point mass at its middle.
@@ -555,6 +569,38 @@ fn true_inertials(chain: &mut Chain, p: &Perturbation) {
                 inertia: Matrix3::zeros(),
             };
             *inertial = inertial.combined(&cable);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against nalgebra's product with `Isometry3::rotation`, signed zeros in the translation included.
+    #[test]
+    fn a_turn_keeps_the_isometry_products_bits() {
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut r = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
+        };
+        for case in 0..2000 {
+            let mut t = Vector3::new(r(), r(), r());
+            if case % 5 == 0 {
+                t[case % 3] = if case % 2 == 0 { -0.0 } else { 0.0 };
+            }
+            let frame = Isometry3::new(t, Vector3::new(r(), r(), r()));
+            let axis = Vector3::new(r(), r(), r()).normalize();
+            let turn = Isometry3::rotation(axis * r() * 2.0);
+            let (ours, theirs) = (turned(&frame, &turn.rotation), frame * turn);
+            let bits = |i: &Isometry3<f64>| {
+                let (t, q) = (i.translation.vector, i.rotation.coords);
+                [t.x, t.y, t.z, q.x, q.y, q.z, q.w].map(f64::to_bits)
+            };
+            assert_eq!(bits(&ours), bits(&theirs), "case {case}: {frame} {turn}");
         }
     }
 }
