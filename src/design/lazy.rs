@@ -117,12 +117,15 @@ impl Factor {
     pub fn d<const R: usize>(&mut self, a: &[f64]) -> SMatrix<f64, R, R> {
         let mut d = [[0.0; R]; R];
         let mut rows = self.rows.as_slice();
-        for (i, (l_ii, column)) in self.diagonal.iter().zip(a.chunks_exact(R)).enumerate() {
+        // As arrays of R, so that a row's R right-hand sides stay in registers through its substitution.
+        let (columns, _) = a.as_chunks::<R>();
+        let (ys, _) = self.y.as_chunks_mut::<R>();
+        for (i, (l_ii, column)) in self.diagonal.iter().zip(columns).enumerate() {
             let (l_i, rest) = rows.split_at(i);
             rows = rest;
-            let (done, next) = self.y.split_at_mut(i * R);
-            let mut y: [f64; R] = std::array::from_fn(|r| column[r]);
-            for (l, yj) in l_i.iter().zip(done.chunks_exact(R)) {
+            let (done, next) = ys.split_at_mut(i);
+            let mut y = *column;
+            for (l, yj) in l_i.iter().zip(done.iter()) {
                 for (v, u) in y.iter_mut().zip(yj) {
                     *v -= l * u;
                 }
@@ -130,7 +133,7 @@ impl Factor {
             for v in &mut y {
                 *v /= l_ii;
             }
-            next[..R].copy_from_slice(&y);
+            next[0] = y;
             for p in 0..R {
                 for q in 0..=p {
                     d[p][q] += y[p] * y[q];
