@@ -1,7 +1,6 @@
 //! The true robot: what the real arm has and the controller does not know.
 pub mod command;
 pub mod history;
-mod lu;
 pub mod motion;
 pub mod perturbation;
 pub mod physics;

@@ -37,7 +37,6 @@ use rand_chacha::ChaCha8Rng;
 
 use super::command::{Command, PathPoint};
 use super::history::Visit;
-use super::lu::lu_solve_in_place;
 use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
@@ -109,13 +108,12 @@ struct Remainder {
     scratch: Scratch,
 }
 
-/// Buffers of one trapezoidal step: three vectors, the step's matrix (factored in place) and its pivots.
+/// Buffers of one trapezoidal step: three vectors and the step's matrix.
 struct Scratch {
     x: DVector<f64>,
     product: DVector<f64>,
     rhs: DVector<f64>,
     matrix: DMatrix<f64>,
-    pivots: Vec<(usize, usize)>,
 }
 
 /// One exact quasi-static solve on the grid of [`KNOT_S`].
@@ -444,7 +442,6 @@ impl Walk<'_> {
                         product: DVector::zeros(n),
                         rhs: DVector::zeros(n),
                         matrix: DMatrix::zeros(n, n),
-                        pivots: Vec::with_capacity(n),
                     },
                 });
             }
@@ -637,8 +634,8 @@ impl Remainder {
     /// One trapezoidal (Newmark average-acceleration) step to time `t`, driven by `quasi_static` there.
     ///
     /// In place, in the order of the expressions `s δ + M (z a₀ + v 4/h + a) + C (z a₁ + v)` and
-    /// `S + C a₁ + M a₀` (each product whole before it is added), the step's matrix factored where it lies:
-    /// the bits of the allocating form (nalgebra's product and LU), without an allocation per node.
+    /// `S + C a₁ + M a₀` (each product whole before it is added): the bits of the allocating form (nalgebra's
+    /// products), without its allocations but the LU's (nalgebra's, on a copy of the step's matrix).
     fn step(&mut self, t: f64, quasi_static: &DVector<f64>, linear: &Linear) -> Result<()> {
         let h = t - self.t;
         if h > 0.0 {
@@ -648,7 +645,6 @@ impl Remainder {
                 product,
                 rhs,
                 matrix,
-                pivots,
             } = &mut self.scratch;
             let (a0, a1) = (4.0 / (h * h), 2.0 / h);
             rhs.gemv(1.0, s, quasi_static, 0.0);
@@ -666,7 +662,7 @@ impl Remainder {
             for (((out, s), c), m) in matrix.iter_mut().zip(s.iter()).zip(c.iter()).zip(m.iter()) {
                 *out = s + c * a1 + m * a0;
             }
-            if !lu_solve_in_place(matrix.as_mut_slice(), rhs.as_mut_slice(), pivots) {
+            if !matrix.clone().lu().solve_mut(rhs) {
                 return Err(singular(t));
             }
             for (((zi, old), v), a) in rhs
