@@ -5,8 +5,9 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use nalgebra::{Cholesky, DMatrix, DVector, DVectorView, DVectorViewMut, Dyn};
+use nalgebra::{DMatrix, DVector, DVectorView};
 
+use super::cholesky;
 use super::model::RidgeModel;
 use super::stats::{r2_from_sums, standardization, zero_sum_tol};
 use crate::error::{Error, Result};
@@ -284,7 +285,7 @@ impl Block {
     /// Ridge coefficients and the validation SSE they give.
     pub(super) fn solve(&self, target: &Target, alpha: f64) -> (DVector<f64>, f64) {
         let n = self.g.nrows();
-        let w = match self.factor(alpha) {
+        let w = match self.shifted(alpha).cholesky() {
             Some(ch) => ch.solve(&self.b),
             // Only with α = 0 (or α lost in rounding) on collinear features; the minimum-norm solution is
             // the limit of ridge as α → 0.
@@ -307,9 +308,9 @@ impl Block {
 
     /// [`Block::solve`] on each leading `m × m` sub-block, `m` in `sizes`, from one factorization of the whole;
     /// `each(k, w, sse)` receives the solution of `sizes[k]` (`w` lives until the next call).
-    /// The leading block of a Cholesky factor is the factor of the leading block, and nalgebra computes it by
-    /// the same operations in the same order (its factorization goes column by column, each entry from the
-    /// columns before it; the forward substitution and the matrix–vector product work entry by entry), so
+    /// The leading block of a Cholesky factor is the factor of the leading block, and [`cholesky`] computes it
+    /// by nalgebra's operations in nalgebra's order (the factorization goes column by column, each entry from
+    /// the columns before it; the forward substitution and the matrix–vector product work entry by entry), so
     /// each solution is bit for bit the one of the sub-block alone. Where the whole does not factor (collinear
     /// features at α ≈ 0), each sub-block is solved on its own.
     /// `factor`: [`Block::factor`] at `alpha`; `scratch`: buffers reused from call to call.
@@ -333,35 +334,32 @@ impl Block {
         let Scratch { forward, w, gw } = scratch;
         forward.clear();
         forward.extend_from_slice(self.b.as_slice());
-        // One buffer for every size's solution and one for its product with the validation Gram: the
-        // product is `Gᵥ·w` as `*` computes it (`gemv`, α = 1, β = 0), with nothing allocated per call.
+        // One buffer for every size's solution and one for its product with the validation Gram, with nothing
+        // allocated per call.
         for v in [&mut *w, &mut *gw] {
             v.clear();
             v.resize(p, 0.0);
         }
         // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
-        let mut forward = DVectorViewMut::from_slice(forward, p);
-        ch.l_dirty()
-            .solve_lower_triangular_unchecked_mut(&mut forward);
-        let mut w = DVectorViewMut::from_slice(w, p);
-        let mut gw = DVectorViewMut::from_slice(gw, p);
+        let l = ch.as_slice();
+        cholesky::solve_lower(l, forward);
+        let (gv, cv) = (self.gv.as_slice(), self.cv.as_slice());
         for (k, &m) in sizes.iter().enumerate() {
-            let mut wm = w.rows_mut(0, m);
-            wm.copy_from(&forward.rows(0, m));
-            ch.l_dirty()
-                .view((0, 0), (m, m))
-                .ad_solve_lower_triangular_unchecked_mut(&mut wm);
-            let mut gwm = gw.rows_mut(0, m);
-            gwm.gemv(1.0, &self.gv.view((0, 0), (m, m)), &wm, 0.0);
-            let sse = target.rr - 2.0 * wm.dot(&self.cv.rows(0, m)) + wm.dot(&gwm);
-            each(k, w.rows(0, m), sse.max(0.0));
+            let (wm, gwm) = (&mut w[..m], &mut gw[..m]);
+            wm.copy_from_slice(&forward[..m]);
+            cholesky::solve_upper_transposed(l, p, wm);
+            cholesky::gemv(gv, p, wm, gwm);
+            let sse = target.rr - 2.0 * cholesky::dot(wm, &cv[..m]) + cholesky::dot(wm, gwm);
+            each(k, DVectorView::from_slice(wm, m), sse.max(0.0));
         }
     }
 
-    /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal; `None` where it does not
-    /// factor.
+    /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal (nalgebra's bits, by
+    /// [`cholesky::factor_in_place`]); `None` where it does not factor.
     pub(super) fn factor(&self, alpha: f64) -> Option<Factor> {
-        self.shifted(alpha).cholesky()
+        let mut a = self.shifted(alpha);
+        let n = a.nrows();
+        cholesky::factor_in_place(a.as_mut_slice(), n, &mut Vec::with_capacity(n)).then_some(a)
     }
 
     /// The training Gram block plus `alpha` on its diagonal.
@@ -384,7 +382,9 @@ impl Block {
     }
 }
 
-pub(super) type Factor = Cholesky<f64, Dyn>;
+/// A factor of `G + αI`: its lower triangle is the Cholesky factor (nalgebra's bits), the strict upper
+/// triangle `G`'s.
+pub(super) type Factor = DMatrix<f64>;
 
 /// [`Block::solve_leading`]'s working vectors (the forward substitution, a solution, its product with the
 /// validation Gram), kept across its calls instead of three allocations per structure and α.

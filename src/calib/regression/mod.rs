@@ -13,6 +13,7 @@
 //! on the size of `x⁵`. The intercept is left unpenalized by centring features and target, so a constant
 //! offset in an error parameter is never shrunk.
 
+mod cholesky;
 mod design;
 mod model;
 mod shared;
