@@ -199,6 +199,19 @@ mod tests {
         w.into_inner().unwrap()
     }
 
+    /// `bytes` (a file with its header) equal to its header and `rows` written by [`by_strings`].
+    fn same_as_strings(bytes: Vec<u8>, rows: &[Vec<String>]) {
+        let text = String::from_utf8(bytes).unwrap();
+        let header: Vec<String> = text
+            .lines()
+            .next()
+            .unwrap()
+            .split(',')
+            .map(String::from)
+            .collect();
+        assert_eq!(text.as_bytes(), by_strings(&header, rows));
+    }
+
     /// Both files, byte for byte as before, on values `Display` and ryu write differently (exponents, whole
     /// numbers, signed zeros, halfway ties, not-a-number) and with every optional column, present and absent.
     #[test]
@@ -271,15 +284,7 @@ mod tests {
                 row
             })
             .collect();
-        let text = String::from_utf8(measurements_csv(&campaign).unwrap()).unwrap();
-        let header: Vec<String> = text
-            .lines()
-            .next()
-            .unwrap()
-            .split(',')
-            .map(String::from)
-            .collect();
-        assert_eq!(text.as_bytes(), by_strings(&header, &measured));
+        same_as_strings(measurements_csv(&campaign).unwrap(), &measured);
         let truth: Vec<Vec<String>> = campaign
             .points
             .iter()
@@ -292,14 +297,6 @@ mod tests {
                 row
             })
             .collect();
-        let text = String::from_utf8(truth_csv(&campaign).unwrap()).unwrap();
-        let header: Vec<String> = text
-            .lines()
-            .next()
-            .unwrap()
-            .split(',')
-            .map(String::from)
-            .collect();
-        assert_eq!(text.as_bytes(), by_strings(&header, &truth));
+        same_as_strings(truth_csv(&campaign).unwrap(), &truth);
     }
 }
