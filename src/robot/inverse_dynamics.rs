@@ -87,24 +87,7 @@ pub fn inverse_dynamics(
     out: &mut [f64],
 ) {
     geometry(chain, frames, payload, ws);
-    recurse(chain, frames, payload, gravity, qd, qdd, ws, out);
-}
-
-/// [`inverse_dynamics`] on the same `frames` (and chain and payload) as the last call with `ws`, at other rates
-/// or gravity: the world axes, centres of mass and inertias are that call's, the arithmetic the same (a
-/// linearisation's columns, a dozen passes on one posture).
-#[allow(clippy::too_many_arguments)]
-pub fn inverse_dynamics_again(
-    chain: &Chain,
-    frames: &Frames,
-    payload: &Payload,
-    gravity: &Vector3<f64>,
-    qd: &[f64],
-    qdd: &[f64],
-    ws: &mut Workspace,
-    out: &mut [f64],
-) {
-    recurse(chain, frames, payload, gravity, qd, qdd, ws, out);
+    inverse_dynamics_again(chain, frames, payload, gravity, qd, qdd, ws, out);
 }
 
 /// What the passes read of `frames` alone, into `ws`.
@@ -128,9 +111,12 @@ fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspac
     }
 }
 
-/// The Newton–Euler recursion of [`inverse_dynamics`] on the geometry in `ws`.
+/// [`inverse_dynamics`] on the same `frames` (and chain and payload) as the last call with `ws`, at other rates
+/// or gravity: the world axes, centres of mass and inertias are that call's, the arithmetic the same (a
+/// linearisation's columns, a dozen passes on one posture): the Newton–Euler recursion on the geometry in `ws`,
+/// which [`inverse_dynamics`] computes first.
 #[allow(clippy::too_many_arguments)]
-fn recurse(
+pub fn inverse_dynamics_again(
     chain: &Chain,
     frames: &Frames,
     payload: &Payload,
