@@ -245,10 +245,10 @@ struct Scan {
 
 impl Timeline<'_> {
     /// The grid point with the smallest registration residual (the first of equals), found from every
-    /// [`COARSE`]-th point and the points between its two neighbours: where the residual falls and then rises
-    /// along the grid, as the arm's motion over the shift makes it, the same point as a scan of all 41, from 17
-    /// registrations. Where the coarse residuals do not fall strictly then rise strictly (a tie, a non-finite
-    /// value, two valleys), every point is scanned.
+    /// [`COARSE`]-th point, then downhill from the lowest of those between its two neighbours: where the
+    /// residual falls and then rises along the grid, as the arm's motion over the shift makes it, the same point
+    /// as a scan of all 41, from 12 to 15 registrations (11 coarse). Where the coarse residuals do not fall
+    /// strictly then rise strictly (a tie, a non-finite value, two valleys), every point is scanned.
     fn scan(&self, dh: &DhChain, bound_s: f64, step: f64) -> Result<Scan> {
         let mut scan = Scan {
             best: (f64::INFINITY, usize::MAX),
@@ -279,14 +279,32 @@ impl Timeline<'_> {
         let valley = coarse.iter().all(|r| r.is_finite())
             && coarse[..=lowest].windows(2).all(|w| w[0] > w[1])
             && coarse[lowest..].windows(2).all(|w| w[0] < w[1]);
-        let fine = if valley {
-            let centre = lowest * COARSE;
-            centre.saturating_sub(COARSE - 1)..=(centre + COARSE - 1).min(GRID)
-        } else {
-            0..=GRID
-        };
-        for k in fine.filter(|k| !k.is_multiple_of(COARSE)) {
-            visit(k, &mut scan)?;
+        if !valley {
+            for k in (0..=GRID).filter(|k| !k.is_multiple_of(COARSE)) {
+                visit(k, &mut scan)?;
+            }
+            return Ok(scan);
+        }
+        // Along the valley the grid's lowest point is where the residual stops falling, within COARSE − 1
+        // points of the coarse lowest: down to the left while it does not rise (the first of equals), else
+        // down to the right while it falls.
+        let centre = lowest * COARSE;
+        let (mut k, mut low) = (centre, coarse[lowest]);
+        while k > centre.saturating_sub(COARSE - 1) {
+            let r = visit(k - 1, &mut scan)?;
+            if r > low {
+                break;
+            }
+            (k, low) = (k - 1, r);
+        }
+        if k == centre {
+            while k < (centre + COARSE - 1).min(GRID) {
+                let r = visit(k + 1, &mut scan)?;
+                if r >= low {
+                    break;
+                }
+                (k, low) = (k + 1, r);
+            }
         }
         Ok(scan)
     }
