@@ -10,8 +10,9 @@
 //! The estimate minimises the RMS residual of the rigid registration of the nominal kinematics (tracker frame
 //! and reflector mounting, [`fit_tracker_frame`]) over δ: a 1-D problem, solved by a grid scan over
 //! ±`bound` and Brent's search in the best cell, rather than as one more parameter of every method's
-//! Levenberg–Marquardt, because the residual is not differentiable in δ where the interpolation switches
-//! neighbours, and because one estimate then serves every method alike. The nominal model's geometric errors
+//! Levenberg–Marquardt, because one estimate then serves every method alike (each row is interpolated through
+//! the same neighbours in time whatever δ, so the residual is smooth in δ and Brent's parabolic steps converge
+//! in a few evaluations; the grid finds the valley first). The nominal model's geometric errors
 //! (tenths of a millimetre) do not depend on the motion and move the minimum little; **lost motion does**: each
 //! joint lags half its backlash behind the direction it moves in, which shifts the flange along the motion as a
 //! clock offset does. Fitted on δ alone, the iiwa's 0.2 mrad of lost motion biased a 3 ms offset by −214 µs at
