@@ -165,6 +165,7 @@ fn gemv_rows<const B: usize>(g: &[f64], ld: usize, w: &[f64], y: &mut [f64], i: 
 
 /// `a·b` as nalgebra's `dot`: eight partial sums over whole chunks of eight, added pairwise (0 + 4, 1 + 5, …)
 /// into the result, then the remaining products one by one.
+#[inline]
 pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let whole = n / 8 * 8;
