@@ -8,49 +8,72 @@
 //! writes an update `y ← a·x + y`; `y += a·x` adds the same two numbers, which IEEE addition does alike in
 //! either order.
 
-/// `a` (column-major `n × n`) replaced by its lower Cholesky factor, the strict upper triangle left as it was;
-/// `false` where a pivot is zero, negative or not a number (the matrix does not factor). Column by column, each
-/// from the columns before it, as nalgebra's `Cholesky::new`: every entry receives the same updates in the same
-/// order. nalgebra updates column `j` by one `axpy` per earlier column `k` (`(−L[j,k])·L[j.., k] + y`); here a
-/// block of rows keeps its entries in registers across all `k`, each entry's updates still in `k` order.
+/// The lower Cholesky factor of `g + αI` (`g` column-major `n × n`) appended to `out`, the strict upper triangle
+/// `g`'s; `false` where a pivot is zero, negative or not a number (the matrix does not factor; `out` still grows
+/// by `n²`, the rest zeros). Column by column, each from the columns before it, as nalgebra's `Cholesky::new`:
+/// every entry receives the same updates in the same order. nalgebra updates column `j` by one `axpy` per
+/// earlier column `k` (`(−L[j,k])·L[j.., k] + y`); here a block of rows keeps its entries in registers across
+/// all `k`, each entry's updates still in `k` order. Each column of `g` is copied in (α added to its diagonal
+/// entry) just before its turn, instead of the whole matrix copied first: a column enters a left-looking
+/// factorization only at its own turn, so the numbers are those of the shifted matrix factored in place.
 /// `neg`: a buffer for `−L[j, ..j]`.
-pub(super) fn factor_in_place(a: &mut [f64], n: usize, neg: &mut Vec<f64>) -> bool {
-    debug_assert_eq!(a.len(), n * n);
-    neg.clear();
-    for j in 0..n {
-        let (done, rest) = a.split_at_mut(j * n);
-        let col_j = &mut rest[..n];
-        neg.push(0.0);
-        for (f, col_k) in neg.iter_mut().zip(done.chunks_exact(n)) {
-            *f = -col_k[j];
-        }
-        let neg = &neg[..j];
-        let mut i = j;
-        while i + 16 <= n {
-            update::<16>(col_j, done, neg, n, i);
-            i += 16;
-        }
-        for b in [8, 4, 2, 1] {
-            if i + b <= n {
-                match b {
-                    8 => update::<8>(col_j, done, neg, n, i),
-                    4 => update::<4>(col_j, done, neg, n, i),
-                    2 => update::<2>(col_j, done, neg, n, i),
-                    _ => update::<1>(col_j, done, neg, n, i),
-                }
-                i += b;
-            }
-        }
-        let diag = col_j[j];
-        // nalgebra's test: not zero, and `try_sqrt` (`v ≥ 0`, so NaN fails).
-        if diag.is_nan() || diag <= 0.0 {
+pub(super) fn factor_shifted(
+    g: &[f64],
+    alpha: f64,
+    n: usize,
+    out: &mut Vec<f64>,
+    neg: &mut Vec<f64>,
+) -> bool {
+    debug_assert_eq!(g.len(), n * n);
+    if n == 0 {
+        return true;
+    }
+    let start = out.len();
+    for (j, col) in g.chunks_exact(n).enumerate() {
+        out.extend_from_slice(col);
+        let a = &mut out[start..];
+        a[j * n + j] += alpha;
+        if !factor_column(a, n, j, neg) {
+            out.resize(start + n * n, 0.0);
             return false;
         }
-        let denom = diag.sqrt();
-        col_j[j] = denom;
-        for v in &mut col_j[j + 1..] {
-            *v /= denom;
+    }
+    true
+}
+
+/// Column `j` of [`factor_shifted`], the columns before it already factored (`a` holds columns `..=j` at
+/// least); `false` where its pivot fails.
+fn factor_column(a: &mut [f64], n: usize, j: usize, neg: &mut Vec<f64>) -> bool {
+    let (done, rest) = a.split_at_mut(j * n);
+    let col_j = &mut rest[..n];
+    neg.clear();
+    neg.extend(done.chunks_exact(n).map(|col_k| -col_k[j]));
+    let neg = &neg[..j];
+    let mut i = j;
+    while i + 16 <= n {
+        update::<16>(col_j, done, neg, n, i);
+        i += 16;
+    }
+    for b in [8, 4, 2, 1] {
+        if i + b <= n {
+            match b {
+                8 => update::<8>(col_j, done, neg, n, i),
+                4 => update::<4>(col_j, done, neg, n, i),
+                2 => update::<2>(col_j, done, neg, n, i),
+                _ => update::<1>(col_j, done, neg, n, i),
+            }
+            i += b;
         }
+    }
+    let diag = col_j[j];
+    // nalgebra's test: not zero, and `try_sqrt` (`v ≥ 0`, so NaN fails).
+    if diag.is_nan() || diag <= 0.0 {
+        return false;
+    }
+    let denom = diag.sqrt();
+    col_j[j] = denom;
+    for v in &mut col_j[j + 1..] {
+        *v /= denom;
     }
     true
 }
@@ -142,6 +165,7 @@ fn gemv_rows<const B: usize>(g: &[f64], ld: usize, w: &[f64], y: &mut [f64], i: 
 
 /// `a·b` as nalgebra's `dot`: eight partial sums over whole chunks of eight, added pairwise (0 + 4, 1 + 5, …)
 /// into the result, then the remaining products one by one.
+#[inline]
 pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let whole = n / 8 * 8;
@@ -187,7 +211,8 @@ mod tests {
         g
     }
 
-    /// Every kernel against nalgebra's own call, bit for bit, on sizes 1 to 40 and every leading block.
+    /// Every kernel against nalgebra's own call, bit for bit, on sizes 1 to 40 and every leading block (the
+    /// factorization also of the matrix shifted as it is copied in).
     #[test]
     fn kernels_give_nalgebras_bits() {
         let mut rng = ChaCha8Rng::seed_from_u64(27);
@@ -200,20 +225,33 @@ mod tests {
                 (3 * n, 10.0),
             ] {
                 let g = gram(&mut rng, n, rows, alpha);
-                let mut mine = g.clone();
-                let ok = factor_in_place(mine.as_mut_slice(), n, &mut Vec::new());
+                let mut mine = Vec::new();
+                let ok = factor_shifted(g.as_slice(), 0.0, n, &mut mine, &mut Vec::new());
                 let theirs = g.clone().cholesky();
                 assert_eq!(ok, theirs.is_some(), "n = {n}, rows = {rows}");
+                // The same matrix plus a shift, factored as it is copied in after what a buffer holds.
+                for shift in [0.0, 1e-3, 1.0] {
+                    let mut plus = g.clone();
+                    for i in 0..n {
+                        plus[(i, i)] += shift;
+                    }
+                    let mut out = vec![7.0; 3];
+                    let ok = factor_shifted(g.as_slice(), shift, n, &mut out, &mut Vec::new());
+                    assert_eq!(out.len(), 3 + n * n);
+                    match plus.cholesky() {
+                        Some(ch) => {
+                            assert!(ok, "n = {n}, shift {shift}");
+                            assert_eq!(bits(&out[3..]), bits(ch.l_dirty().as_slice()));
+                        }
+                        None => assert!(!ok, "n = {n}, shift {shift}"),
+                    }
+                }
                 let Some(ch) = theirs else {
                     refused += 1;
                     continue;
                 };
                 factored += 1;
-                assert_eq!(
-                    bits(mine.as_slice()),
-                    bits(ch.l_dirty().as_slice()),
-                    "n = {n}"
-                );
+                assert_eq!(bits(&mine), bits(ch.l_dirty().as_slice()), "n = {n}");
                 let l = ch.l_dirty();
                 let b = DVector::from_fn(n, |_, _| rng.random_range(-1.0..1.0));
                 let mut fwd = b.clone();

@@ -104,30 +104,33 @@ impl Design {
         })
     }
 
-    /// Validation residuals `y_val − ŷ` of a fitted structure; only the few structures that compete for the
-    /// final choice need them.
+    /// Validation residuals `y_val − ŷ` of a fitted structure, written into `res`; only the few structures that
+    /// compete for the final choice need them. `idx`: a buffer for the structure's feature columns.
     pub(super) fn val_residuals(
         &self,
         target: &Target,
-        inputs: &[usize],
-        degree: usize,
-        w: &DVector<f64>,
-    ) -> Vec<f64> {
-        let idx = self.feature_indices(inputs, degree);
+        (inputs, degree): (&[usize], usize),
+        w: &[f64],
+        idx: &mut Vec<usize>,
+        res: &mut Vec<f64>,
+    ) {
+        self.feature_indices_into(inputs, degree, idx);
         // Column by column (contiguous), each row's sum in feature order as a row-wise sum would take it; the
         // first column's products start the sums, and the residuals overwrite them in place.
         let rows = self.f_val.nrows();
         let column = |j: usize| &self.f_val.as_slice()[j * rows..(j + 1) * rows];
-        let mut terms = idx.iter().zip(w.iter());
-        let mut res: Vec<f64> = match terms.next() {
-            Some((&j, &wj)) => column(j).iter().map(|f| f * wj).collect(),
-            None => vec![0.0; rows],
-        };
+        res.clear();
+        match idx.first().zip(w.first()) {
+            Some((&j, &wj)) => res.extend(column(j).iter().map(|f| f * wj)),
+            None => res.resize(rows, 0.0),
+        }
         // Four columns per pass over the rows: each row still adds its terms one by one in feature order.
-        let rest: Vec<(&[f64], f64)> = terms.map(|(&j, &wj)| (column(j), wj)).collect();
-        let mut quads = rest.chunks_exact(4);
-        for q in &mut quads {
-            let [(c0, w0), (c1, w1), (c2, w2), (c3, w3)] = [q[0], q[1], q[2], q[3]];
+        let (rest, w_rest) = (idx.get(1..).unwrap_or(&[]), w.get(1..).unwrap_or(&[]));
+        let n_rest = rest.len().min(w_rest.len());
+        let quads = n_rest / 4 * 4;
+        for (q, wq) in rest[..quads].chunks_exact(4).zip(w_rest.chunks_exact(4)) {
+            let [c0, c1, c2, c3] = [0, 1, 2, 3].map(|t| column(q[t]));
+            let [w0, w1, w2, w3] = [wq[0], wq[1], wq[2], wq[3]];
             for (i, a) in res.iter_mut().enumerate() {
                 let mut v = *a;
                 v += c0[i] * w0;
@@ -137,13 +140,14 @@ impl Design {
                 *a = v;
             }
         }
-        for &(c, wj) in quads.remainder() {
-            res.iter_mut().zip(c).for_each(|(a, f)| *a += f * wj);
+        for (&j, &wj) in rest[quads..n_rest].iter().zip(&w_rest[quads..]) {
+            res.iter_mut()
+                .zip(column(j))
+                .for_each(|(a, f)| *a += f * wj);
         }
         res.iter_mut()
             .zip(target.r.iter())
             .for_each(|(a, r)| *a = r - *a);
-        res
     }
 
     /// [`RidgeModel::predict`] of `model` (fitted on this design) at every training row, then every validation
@@ -169,11 +173,25 @@ impl Design {
 
     /// Columns of the model on `inputs` (rank order) at `degree`, in [`RidgeModel::predict`]'s order.
     pub(super) fn feature_indices(&self, inputs: &[usize], degree: usize) -> Vec<usize> {
-        let mut idx: Vec<usize> = inputs
-            .iter()
-            .flat_map(|&k| (0..degree).map(move |d| k * self.max_degree + d))
-            .collect();
-        if self.cross && degree >= 2 {
+        let mut idx = Vec::new();
+        self.feature_indices_into(inputs, degree, &mut idx);
+        idx
+    }
+
+    /// [`Design::feature_indices`] written into `idx`.
+    pub(super) fn feature_indices_into(
+        &self,
+        inputs: &[usize],
+        degree: usize,
+        idx: &mut Vec<usize>,
+    ) {
+        idx.clear();
+        idx.extend(
+            inputs
+                .iter()
+                .flat_map(|&k| (0..degree).map(move |d| k * self.max_degree + d)),
+        );
+        if self.crossed(degree) {
             let c = self.n_cand;
             for (i, &a) in inputs.iter().enumerate() {
                 for &b in &inputs[i + 1..] {
@@ -182,7 +200,12 @@ impl Design {
                 }
             }
         }
-        idx
+    }
+
+    /// Whether the features at `degree` hold cross products of the inputs, which fall among the powers: without
+    /// them the features of the top k inputs are the leading ones of the top k + 1's.
+    pub(super) fn crossed(&self, degree: usize) -> bool {
+        self.cross && degree >= 2
     }
 
     /// The usable candidates in rank order of |Pearson r| with the target on training data (ties by index),
@@ -313,17 +336,17 @@ impl Block {
     /// the columns before it; the forward substitution and the matrix–vector product work entry by entry), so
     /// each solution is bit for bit the one of the sub-block alone. Where the whole does not factor (collinear
     /// features at α ≈ 0), each sub-block is solved on its own.
-    /// `factor`: [`Block::factor`] at `alpha`; `scratch`: buffers reused from call to call.
+    /// `factor`: the block's factor at `alpha` ([`Block::factors`]); `scratch`: buffers reused from call to call.
     pub(super) fn solve_leading(
         &self,
         target: &Target,
         alpha: f64,
         sizes: &[usize],
-        factor: Option<&Factor>,
+        factor: Option<&[f64]>,
         scratch: &mut Scratch,
         mut each: impl FnMut(usize, DVectorView<f64>, f64),
     ) {
-        let Some(ch) = factor else {
+        let Some(l) = factor else {
             for (k, &m) in sizes.iter().enumerate() {
                 let (w, sse) = self.leading(m).solve(target, alpha);
                 each(k, w.as_view(), sse);
@@ -335,13 +358,13 @@ impl Block {
         forward.clear();
         forward.extend_from_slice(self.b.as_slice());
         // One buffer for every size's solution and one for its product with the validation Gram, with nothing
-        // allocated per call.
+        // allocated per call; each size writes the entries it reads.
         for v in [&mut *w, &mut *gw] {
-            v.clear();
-            v.resize(p, 0.0);
+            if v.len() < p {
+                v.resize(p, 0.0);
+            }
         }
         // The forward substitution too goes entry by entry: its leading rows are each sub-block's.
-        let l = ch.as_slice();
         cholesky::solve_lower(l, forward);
         let (gv, cv) = (self.gv.as_slice(), self.cv.as_slice());
         for (k, &m) in sizes.iter().enumerate() {
@@ -354,12 +377,18 @@ impl Block {
         }
     }
 
-    /// The Cholesky factor of the training Gram block plus `alpha` on its diagonal (nalgebra's bits, by
-    /// [`cholesky::factor_in_place`]); `None` where it does not factor.
-    pub(super) fn factor(&self, alpha: f64) -> Option<Factor> {
-        let mut a = self.shifted(alpha);
-        let n = a.nrows();
-        cholesky::factor_in_place(a.as_mut_slice(), n, &mut Vec::with_capacity(n)).then_some(a)
+    /// The Cholesky factors of the training Gram block plus each of `alphas` on its diagonal (nalgebra's bits,
+    /// by [`cholesky::factor_shifted`]), one after another in one buffer.
+    pub(super) fn factors(&self, alphas: &[f64]) -> Grid {
+        let p = self.g.nrows();
+        let g = self.g.as_slice();
+        let mut data = Vec::with_capacity(alphas.len() * g.len());
+        let neg = &mut Vec::with_capacity(p);
+        let ok = alphas
+            .iter()
+            .map(|&alpha| cholesky::factor_shifted(g, alpha, p, &mut data, neg))
+            .collect();
+        Grid { p, data, ok }
     }
 
     /// The training Gram block plus `alpha` on its diagonal.
@@ -382,9 +411,22 @@ impl Block {
     }
 }
 
-/// A factor of `G + αI`: its lower triangle is the Cholesky factor (nalgebra's bits), the strict upper
-/// triangle `G`'s.
-pub(super) type Factor = DMatrix<f64>;
+/// A structure's factors of `G + αI` at each α of a grid, one `p × p` column-major matrix after another in one
+/// buffer: a factor's lower triangle is the Cholesky factor (nalgebra's bits), its strict upper triangle `G`'s.
+pub(super) struct Grid {
+    p: usize,
+    data: Vec<f64>,
+    /// Whether the matrix at each α factored.
+    ok: Vec<bool>,
+}
+
+impl Grid {
+    /// The factor at the `a`-th α of the grid; `None` where `G + αI` does not factor.
+    pub(super) fn at(&self, a: usize) -> Option<&[f64]> {
+        let len = self.p * self.p;
+        self.ok[a].then(|| &self.data[a * len..(a + 1) * len])
+    }
+}
 
 /// [`Block::solve_leading`]'s working vectors (the forward substitution, a solution, its product with the
 /// validation Gram), kept across its calls instead of three allocations per structure and α.
@@ -395,7 +437,7 @@ pub(super) struct Scratch {
     gw: Vec<f64>,
 }
 
-/// [`Block::factor`]s kept from one fit to the next on the same design: a factor depends on the features and
+/// [`Block::factors`] kept from one fit to the next on the same design: a factor depends on the features and
 /// α, not on the target, and `residual-ridge`'s rounds search the same structures on new residuals. Those the
 /// latest fit did not use are dropped, so it holds at most one fit's worth.
 #[derive(Default)]
@@ -406,29 +448,25 @@ pub(super) struct Factors {
 }
 
 /// One block's factors: the α grid's bits, the factor at each α, and the fit that last used them.
-type Kept = (Vec<u64>, Vec<Option<Factor>>, u64);
+type Kept = (Vec<u64>, SharedGrid, u64);
 
 impl Factors {
     /// The factors of `block` (on features `idx`) at each of `alphas`, computed on first use: one look-up per
-    /// block, not per α.
-    pub(super) fn get(
-        &mut self,
-        block: &Block,
-        idx: &[usize],
-        alphas: &[f64],
-    ) -> &[Option<Factor>] {
+    /// block, not per α, and no key built where the block is kept.
+    pub(super) fn get(&mut self, block: &Block, idx: &[usize], alphas: &[f64]) -> SharedGrid {
         let fit = self.fit;
-        let bits: Vec<u64> = alphas.iter().map(|a| a.to_bits()).collect();
-        let entry = self
-            .map
-            .entry(idx.to_vec())
-            .or_insert_with(|| (Vec::new(), Vec::new(), fit));
-        if entry.0 != bits {
-            entry.1 = alphas.iter().map(|&a| block.factor(a)).collect();
-            entry.0 = bits;
+        if let Some(entry) = self.map.get_mut(idx) {
+            if !same_bits(&entry.0, alphas) {
+                entry.0 = alphas.iter().map(|a| a.to_bits()).collect();
+                entry.1 = Arc::new(block.factors(alphas));
+            }
+            entry.2 = fit;
+            return entry.1.clone();
         }
-        entry.2 = fit;
-        &entry.1
+        let made = Arc::new(block.factors(alphas));
+        let bits = alphas.iter().map(|a| a.to_bits()).collect();
+        self.map.insert(idx.to_vec(), (bits, made.clone(), fit));
+        made
     }
 
     /// Ends a fit: drops what it did not use.
@@ -439,30 +477,48 @@ impl Factors {
     }
 }
 
-/// [`Block::factor`]s kept for every fit on one design, from any thread: the same factors whichever fit computed
+/// Whether `bits` are the bits of `alphas`, one by one.
+fn same_bits(bits: &[u64], alphas: &[f64]) -> bool {
+    bits.len() == alphas.len() && bits.iter().zip(alphas).all(|(b, a)| *b == a.to_bits())
+}
+
+/// [`Block::factors`] kept for every fit on one design, from any thread: the same factors whichever fit computed
 /// them first (a function of the features and α alone). All are kept until the design is dropped.
 #[derive(Default)]
 pub(super) struct SharedFactors {
-    /// By feature columns and the α grid's bits: the factor at each α of the grid.
-    map: Mutex<HashMap<GridKey, GridFactors>>,
+    /// By feature columns: for each α grid met (its bits), the factor at each of its α.
+    map: Mutex<HashMap<Vec<usize>, Vec<GridOf>>>,
 }
 
-/// A structure's feature columns and an α grid's bits.
-type GridKey = (Vec<usize>, Vec<u64>);
-/// The factors of one structure at each α of a grid.
-type GridFactors = Arc<Vec<Option<Factor>>>;
+/// An α grid's bits and a structure's factors at each of its α.
+type GridOf = (Vec<u64>, SharedGrid);
+
+/// The factors of one structure at each α of a grid, shared.
+type SharedGrid = Arc<Grid>;
 
 impl SharedFactors {
     /// The factors of `block` (on features `idx`) at every α of `alphas`, in order, computed on first use
-    /// (outside the lock: a fit that computed them too keeps the first): one look-up per structure, not per α.
-    pub(super) fn get_all(&self, block: &Block, idx: &[usize], alphas: &[f64]) -> GridFactors {
-        let key = (idx.to_vec(), alphas.iter().map(|a| a.to_bits()).collect());
+    /// (outside the lock: a fit that computed them too keeps the first): one look-up per structure, not per α,
+    /// and no key built where the structure is kept.
+    pub(super) fn get_all(&self, block: &Block, idx: &[usize], alphas: &[f64]) -> SharedGrid {
         let lock = || self.map.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some(f) = lock().get(&key) {
-            return f.clone();
+        let find = |grids: &[GridOf]| {
+            grids
+                .iter()
+                .find(|(bits, _)| same_bits(bits, alphas))
+                .map(|(_, f)| f.clone())
+        };
+        if let Some(f) = lock().get(idx).and_then(|grids| find(grids)) {
+            return f;
         }
-        let made = Arc::new(alphas.iter().map(|&a| block.factor(a)).collect());
-        lock().entry(key).or_insert(made).clone()
+        let made = Arc::new(block.factors(alphas));
+        let mut map = lock();
+        let grids = map.entry(idx.to_vec()).or_default();
+        find(grids).unwrap_or_else(|| {
+            let bits = alphas.iter().map(|a| a.to_bits()).collect();
+            grids.push((bits, made.clone()));
+            made
+        })
     }
 }
 
@@ -563,7 +619,7 @@ pub(super) fn build(
     inputs: &[usize],
     degree: usize,
     alpha: f64,
-    w: &DVector<f64>,
+    w: &[f64],
     sse: f64,
 ) -> RidgeModel {
     let idx = design.feature_indices(inputs, degree);
@@ -571,12 +627,12 @@ pub(super) fn build(
         inputs: inputs.to_vec(),
         degree,
         alpha,
-        cross_terms: design.cross && degree >= 2 && inputs.len() >= 2,
+        cross_terms: design.crossed(degree) && inputs.len() >= 2,
         input_mean: inputs.iter().map(|&c| design.input_mean[c]).collect(),
         input_scale: inputs.iter().map(|&c| design.input_scale[c]).collect(),
         feature_mean: idx.iter().map(|&j| design.feature_mean[j]).collect(),
         feature_scale: idx.iter().map(|&j| design.feature_scale[j]).collect(),
-        coef: w.iter().copied().collect(),
+        coef: w.to_vec(),
         intercept: target.mean,
         validation_r2: target.r2(sse),
     }

@@ -19,13 +19,14 @@ mod model;
 mod shared;
 mod stats;
 
+use std::ops::Range;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use nalgebra::{DMatrix, DVector, DVectorView};
+use nalgebra::{DMatrix, DVectorView};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use design::{Block, Design, Factor, FactorSource, Factors, Scratch, SharedFactors, Target, build};
+use design::{Block, Design, FactorSource, Factors, Scratch, SharedFactors, Target, build};
 pub use model::{MAX_COEFFICIENT, MAX_DEGREE, RidgeModel};
 pub use shared::SharedFeatures;
 pub use stats::r2;
@@ -321,13 +322,14 @@ fn check_inputs(
     Ok(())
 }
 
-/// The winner among the α of one structure.
+/// The winner among the α of one structure: the top `k + 1` inputs of the ranking at `degree`, its coefficients
+/// at `w` of the search's buffer.
 struct RidgeFit {
-    inputs: Vec<usize>,
+    k: usize,
     degree: usize,
     n_features: usize,
     alpha: f64,
-    w: DVector<f64>,
+    w: Range<usize>,
     sse: f64,
 }
 
@@ -339,7 +341,7 @@ fn fit_one(
     opts: &RegressionOptions,
     factors: FactorSource,
 ) -> Result<RidgeModel> {
-    let intercept_only = || build(design, target, &[], 0, 0.0, &DVector::zeros(0), target.rr);
+    let intercept_only = || build(design, target, &[], 0, 0.0, &[], target.rr);
     if target.constant {
         return Ok(intercept_only());
     }
@@ -347,21 +349,21 @@ fn fit_one(
     if order.is_empty() {
         return Ok(intercept_only());
     }
-    let fitted = fit_structures(design, target, &order, n, alphas, factors);
-    let choice = choose(design, target, fitted, n, opts.parsimony_z)?;
+    let (fitted, ws) = fit_structures(design, target, &order, n, alphas, factors);
+    let choice = choose(design, target, (&order, &ws), fitted, n, opts.parsimony_z)?;
     Ok(build(
         design,
         target,
-        &choice.inputs,
+        &order[..=choice.k],
         choice.degree,
         choice.alpha,
-        &choice.w,
+        &ws[choice.w],
         choice.sse,
     ))
 }
 
 /// Every structure (the top k of `order` at each degree) that `n` training points can fit, each with the α
-/// that gives the lowest validation SSE.
+/// that gives the lowest validation SSE, and one buffer holding all their coefficients.
 ///
 /// Without cross terms the features of the top k inputs at a degree are the leading ones of the top k + 1's
 /// ([`Design::feature_indices`] lists them input by input), so one factorization per degree and α serves every
@@ -374,95 +376,107 @@ fn fit_structures(
     n: usize,
     alphas: &[f64],
     mut factors: FactorSource,
-) -> Vec<RidgeFit> {
+) -> (Vec<RidgeFit>, Vec<f64>) {
     let mut fitted = Vec::new();
+    let mut ws = Vec::new();
     let scratch = &mut Scratch::default();
+    let (mut sizes, mut largest) = (Vec::new(), Vec::new());
+    let mut found = Vec::new();
     for degree in 1..=design.max_degree {
         // The feature count grows with k: the structures `n` points can fit are the first few.
-        let idx: Vec<Vec<usize>> = (1..=order.len())
-            .map(|k| design.feature_indices(&order[..k], degree))
-            .take_while(|idx| idx.len() < n)
-            .collect();
-        let Some(largest) = idx.last() else {
-            continue;
-        };
-        let sizes: Vec<usize> = idx.iter().map(Vec::len).collect();
-        let nested = idx.iter().all(|i| largest.starts_with(i));
-        let blocks: Vec<Block> = if nested {
-            vec![Block::new(design, target, largest)]
+        let (nested, blocks) = if design.crossed(degree) {
+            let idx: Vec<Vec<usize>> = (1..=order.len())
+                .map(|k| design.feature_indices(&order[..k], degree))
+                .take_while(|idx| idx.len() < n)
+                .collect();
+            let Some(last) = idx.last() else {
+                continue;
+            };
+            sizes.clear();
+            sizes.extend(idx.iter().map(Vec::len));
+            largest.clone_from(last);
+            let nested = idx.iter().all(|i| largest.starts_with(i));
+            let blocks: Vec<Block> = if nested {
+                vec![Block::new(design, target, &largest)]
+            } else {
+                idx.iter().map(|i| Block::new(design, target, i)).collect()
+            };
+            (nested, blocks)
         } else {
-            idx.iter().map(|i| Block::new(design, target, i)).collect()
-        };
-        // Every α's factor of a kept structure at once: one look-up per structure, not per α.
-        let shared;
-        let kept: Option<&[Option<Factor>]> = match (nested, &mut factors) {
-            (true, FactorSource::Own(f)) => Some(f.get(&blocks[0], largest, alphas)),
-            (true, FactorSource::Shared(f)) => {
-                shared = f.get_all(&blocks[0], largest, alphas);
-                Some(&shared)
+            // The top k inputs' features are k · degree, the leading ones of the largest set's.
+            let count = order.len().min((n - 1) / degree);
+            if count == 0 {
+                continue;
             }
-            _ => None,
+            sizes.clear();
+            sizes.extend((1..=count).map(|k| k * degree));
+            design.feature_indices_into(&order[..count], degree, &mut largest);
+            (true, vec![Block::new(design, target, &largest)])
         };
+        // Every α's factor of a nested structure at once: one look-up per structure, not per α.
+        let grid = nested.then(|| match &mut factors {
+            FactorSource::Own(f) => f.get(&blocks[0], &largest, alphas),
+            FactorSource::Shared(f) => f.get_all(&blocks[0], &largest, alphas),
+            FactorSource::None => Arc::new(blocks[0].factors(alphas)),
+        });
         // α descending, strict improvement: equal scores keep the stronger penalty. Each size's best so far
-        // (α, coefficients, SSE) in a buffer of its own, overwritten where a later α beats it.
-        let mut best: Vec<(f64, DVector<f64>, f64)> = sizes
-            .iter()
-            .map(|&m| (f64::NAN, DVector::zeros(m), f64::NAN))
-            .collect();
-        let mut found = vec![false; sizes.len()];
+        // (α, coefficients, SSE) in the buffer's part for it, overwritten where a later α beats it.
+        let first = fitted.len();
+        let mut at = ws.len();
+        for (k, &m) in sizes.iter().enumerate() {
+            fitted.push(RidgeFit {
+                k,
+                degree,
+                n_features: m,
+                alpha: f64::NAN,
+                w: at..at + m,
+                sse: f64::NAN,
+            });
+            at += m;
+        }
+        ws.resize(at, 0.0);
+        let best = &mut fitted[first..];
+        found.clear();
+        found.resize(sizes.len(), false);
         for (a, &alpha) in alphas.iter().enumerate() {
             let mut keep = |k: usize, w: DVectorView<f64>, sse: f64| {
                 let b = &mut best[k];
-                if !found[k] || sse < b.2 {
-                    b.0 = alpha;
-                    b.1.copy_from(&w);
-                    b.2 = sse;
+                if !found[k] || sse < b.sse {
+                    b.alpha = alpha;
+                    ws[b.w.clone()].copy_from_slice(w.as_slice());
+                    b.sse = sse;
                     found[k] = true;
                 }
             };
-            if nested {
-                let own;
-                let factor = match kept {
-                    Some(kept) => kept[a].as_ref(),
-                    None => {
-                        own = blocks[0].factor(alpha);
-                        own.as_ref()
+            match &grid {
+                Some(grid) => {
+                    blocks[0].solve_leading(target, alpha, &sizes, grid.at(a), scratch, keep)
+                }
+                None => {
+                    for (k, b) in blocks.iter().enumerate() {
+                        let (w, sse) = b.solve(target, alpha);
+                        keep(k, w.as_view(), sse);
                     }
-                };
-                blocks[0].solve_leading(target, alpha, &sizes, factor, scratch, keep);
-            } else {
-                for (k, b) in blocks.iter().enumerate() {
-                    let (w, sse) = b.solve(target, alpha);
-                    keep(k, w.as_view(), sse);
                 }
             }
         }
         assert!(found.iter().all(|&f| f), "alphas is non-empty");
-        for (k, ((alpha, w, sse), size)) in best.into_iter().zip(sizes).enumerate() {
-            fitted.push(RidgeFit {
-                inputs: order[..=k].to_vec(),
-                degree,
-                n_features: size,
-                alpha,
-                w,
-                sse,
-            });
-        }
     }
-    fitted
+    (fitted, ws)
 }
 
 /// The structure chosen: from the fewest features up, a larger one replaces the choice only if its validation
 /// SSE is lower by more than `parsimony_z` standard errors of the paired difference (see
-/// [`RegressionOptions::parsimony_z`]).
+/// [`RegressionOptions::parsimony_z`]). `order` and `ws`: the ranking and the coefficients' buffer of `fitted`.
 fn choose(
     design: &Design,
     target: &Target,
+    (order, ws): (&[usize], &[f64]),
     mut fitted: Vec<RidgeFit>,
     n: usize,
     parsimony_z: f64,
 ) -> Result<RidgeFit> {
-    fitted.sort_by_key(|f| (f.n_features, f.inputs.len()));
+    fitted.sort_by_key(|f| (f.n_features, f.k));
     let mut fitted = fitted.into_iter();
     let Some(mut choice) = fitted.next() else {
         return Err(Error::Invalid(format!(
@@ -470,23 +484,25 @@ fn choose(
              plus intercept)"
         )));
     };
-    let residuals = |f: &RidgeFit| design.val_residuals(target, &f.inputs, f.degree, &f.w);
-    let mut choice_res = residuals(&choice);
+    let idx = &mut Vec::new();
+    let mut residuals = |f: &RidgeFit, res: &mut Vec<f64>| {
+        let structure = (&order[..=f.k], f.degree);
+        design.val_residuals(target, structure, &ws[f.w.clone()], idx, res);
+    };
+    let (mut choice_res, mut res) = (Vec::new(), Vec::new());
+    residuals(&choice, &mut choice_res);
     for f in fitted {
         if f.sse >= choice.sse {
             continue;
         }
-        let res = residuals(&f);
-        let d: Vec<f64> = choice_res
-            .iter()
-            .zip(&res)
-            .map(|(a, b)| a * a - b * b)
-            .collect();
-        let m = d.len() as f64;
-        let gain = d.iter().sum::<f64>();
-        let var = d.iter().map(|v| (v - gain / m).powi(2)).sum::<f64>() / (m - 1.0).max(1.0);
+        residuals(&f, &mut res);
+        let d = || choice_res.iter().zip(&res).map(|(a, b)| a * a - b * b);
+        let m = choice_res.len().min(res.len()) as f64;
+        let gain = d().sum::<f64>();
+        let var = d().map(|v| (v - gain / m).powi(2)).sum::<f64>() / (m - 1.0).max(1.0);
         if gain > parsimony_z * (m * var).sqrt() {
-            (choice, choice_res) = (f, res);
+            choice = f;
+            std::mem::swap(&mut choice_res, &mut res);
         }
     }
     Ok(choice)
@@ -495,6 +511,7 @@ fn choose(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::DVector;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal};
@@ -675,7 +692,7 @@ mod tests {
             let target = Target::new(&design, &y, &y_val);
             let block = Block::new(&design, &target, &design.feature_indices(&inputs, degree));
             let (w, sse) = block.solve(&target, alpha);
-            let m = build(&design, &target, &inputs, degree, alpha, &w, sse);
+            let m = build(&design, &target, &inputs, degree, alpha, w.as_slice(), sse);
             assert_eq!(m.n_features(), w.len());
             assert_close(
                 &m.coef,
@@ -726,7 +743,7 @@ mod tests {
                     &target,
                     alpha,
                     &sizes,
-                    block.factor(alpha).as_ref(),
+                    block.factors(&[alpha]).at(0),
                     &mut Scratch::default(),
                     |_, w, sse| leading.push((w.into_owned(), sse)),
                 );
