@@ -10,6 +10,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::chain::{Chain, JointKind, Payload};
+use super::dynamics::{GravityJoint, gravity_pass_full};
 use super::kinematics::Frames;
 
 /// Per-call workspace of [`inverse_dynamics`].
@@ -90,8 +91,9 @@ pub fn inverse_dynamics(
     inverse_dynamics_again(chain, frames, payload, gravity, qd, qdd, ws, out);
 }
 
-/// What the passes read of `frames` alone, into `ws`.
-fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
+/// What the passes read of `frames` alone, into `ws`: [`inverse_dynamics`]'s first half, which
+/// [`inverse_dynamics_again`] and [`gravity_moments_again`] then reuse.
+pub fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
     let n = chain.dof();
     for i in 0..n {
         ws.axis[i] = frames.axis(chain, i);
@@ -205,10 +207,43 @@ pub fn inverse_dynamics_again(
     }
 }
 
+/// [`super::dynamics::gravity_moments`] on the geometry in `ws` (the last [`geometry`] call's, on the same
+/// `frames`): the centres of mass, axes and anchors that pass computes are those [`geometry`] computed, by the
+/// same expressions, so the torques and moments are the same bits without computing them twice (a moving arm's
+/// fixed point needs both the gravity moments and the inverse dynamics of each iterate).
+pub fn gravity_moments_again(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    ws: &Workspace,
+    torques: &mut [f64],
+    moments: &mut [Vector3<f64>],
+) {
+    assert!(
+        torques.len() == chain.dof() && moments.len() == chain.dof(),
+        "output lengths must equal the chain's dof"
+    );
+    gravity_pass_full(
+        payload,
+        &frames.flange,
+        gravity,
+        torques,
+        Some(moments),
+        |i| GravityJoint {
+            mass: chain.bodies[i + 1].inertial.mass,
+            com: Point3::from(ws.com[i + 1]),
+            axis: ws.axis[i],
+            anchor: Point3::from(ws.anchor[i]),
+            prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
+        },
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::robot::dynamics::{GRAVITY, gravity_torques};
+    use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
     use crate::robot::forward_kinematics;
     use nalgebra::DMatrix;
 
@@ -250,6 +285,26 @@ mod tests {
         gravity_torques(&chain, &frames, &PAYLOAD, &GRAVITY, &mut g);
         for (t, g) in tau.iter().zip(&g) {
             assert!((t + g).abs() < 1e-10, "{t} against {}", -g);
+        }
+    }
+
+    /// The gravity pass on the inverse dynamics' geometry is `gravity_moments`, bit for bit.
+    #[test]
+    fn gravity_moments_on_the_geometry_are_the_same_bits() {
+        let chain = iiwa();
+        let mut frames = Frames::new(&chain);
+        forward_kinematics(&chain, &Q, &mut frames);
+        let mut ws = Workspace::new(&chain);
+        geometry(&chain, &frames, &PAYLOAD, &mut ws);
+        let (mut t0, mut t1) = (vec![0.0; 7], vec![0.0; 7]);
+        let (mut m0, mut m1) = (vec![Vector3::zeros(); 7], vec![Vector3::zeros(); 7]);
+        gravity_moments(&chain, &frames, &PAYLOAD, &GRAVITY, &mut t0, &mut m0);
+        gravity_moments_again(&chain, &frames, &PAYLOAD, &GRAVITY, &ws, &mut t1, &mut m1);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&t0), bits(&t1));
+        assert!(t0.iter().filter(|t| t.abs() > 1e-3).count() >= 4, "{t0:?}");
+        for (a, b) in m0.iter().zip(&m1) {
+            assert_eq!(bits(a.as_slice()), bits(b.as_slice()));
         }
     }
 
