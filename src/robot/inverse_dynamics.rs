@@ -92,7 +92,7 @@ pub fn inverse_dynamics(
 }
 
 /// What the passes read of `frames` alone, into `ws`: [`inverse_dynamics`]'s first half, which
-/// [`inverse_dynamics_again`] and [`gravity_moments_again`] then reuse.
+/// [`inverse_dynamics_again`], [`mass_matrix_column`] and [`gravity_moments_again`] then reuse.
 pub fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
     let n = chain.dof();
     for i in 0..n {
@@ -240,6 +240,83 @@ pub fn gravity_moments_again(
     );
 }
 
+/// Column `j` of the mass matrix on the geometry in `ws` (the last [`geometry`] call's, on the same `frames`):
+/// [`inverse_dynamics_again`] from rest (`q̇ = 0`), without gravity, at a unit acceleration of joint `j`, with
+/// the terms that are then exact zeros left out — the angular velocities, the Coriolis and centripetal terms, and
+/// the bodies before joint `j`, which stay at rest. Leaving out an addition of ±0 changes no nonzero result, so
+/// every entry equals the general pass's, bit for bit but for the sign of an entry that is exactly zero.
+pub fn mass_matrix_column(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    j: usize,
+    ws: &mut Workspace,
+    out: &mut [f64],
+) {
+    let n = chain.dof();
+    assert!(
+        j < n && out.len() == n,
+        "the column must be a joint and the output's length the chain's dof"
+    );
+    // Forward from joint j: the bodies before it at rest, those beyond turning at joint j's unit acceleration.
+    let (mut alpha, mut accel) = (Vector3::zeros(), Vector3::zeros());
+    for i in j..n {
+        let (axis, anchor) = (ws.axis[i], ws.anchor[i]);
+        let parent_origin = frames.body[i].translation.vector;
+        let origin = frames.body[i + 1].translation.vector;
+        let a_anchor = accel + alpha.cross(&(anchor - parent_origin));
+        match chain.joints[i].kind {
+            JointKind::Revolute => {
+                if i == j {
+                    alpha += axis;
+                }
+                accel = a_anchor + alpha.cross(&(origin - anchor));
+            }
+            JointKind::Prismatic => {
+                accel = a_anchor + alpha.cross(&(origin - anchor));
+                if i == j {
+                    accel += axis;
+                }
+            }
+        }
+        ws.alpha[i + 1] = alpha;
+        ws.accel[i + 1] = accel;
+    }
+    for b in j + 1..=n {
+        let m = chain.bodies[b].inertial.mass;
+        let a_com = ws.accel[b] + ws.alpha[b].cross(&ws.com_offset[b]);
+        ws.force[b] = a_com * m;
+        ws.moment[b] = ws.inertia[b] * ws.alpha[b];
+    }
+    // Backward, as in the general pass; the bodies at rest add nothing.
+    let mut f = Vector3::zeros();
+    let mut n_about_origin = Vector3::zeros();
+    let mut reduced_at = frames.flange.translation.vector;
+    if payload.mass > 0.0 {
+        let p = ws.payload_com;
+        let origin = frames.body[n].translation.vector;
+        let a = ws.accel[n] + ws.alpha[n].cross(&(p - origin));
+        f = a * payload.mass;
+        reduced_at = p;
+    }
+    for i in (0..n).rev() {
+        let b = i + 1;
+        let anchor = ws.anchor[i];
+        n_about_origin += (reduced_at - anchor).cross(&f);
+        if b > j {
+            n_about_origin =
+                n_about_origin + ws.moment[b] + (ws.com[b] - anchor).cross(&ws.force[b]);
+            f += ws.force[b];
+        }
+        reduced_at = anchor;
+        let axis = ws.axis[i];
+        out[i] = match chain.joints[i].kind {
+            JointKind::Revolute => axis.dot(&n_about_origin),
+            JointKind::Prismatic => axis.dot(&f),
+        };
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -285,6 +362,46 @@ mod tests {
         gravity_torques(&chain, &frames, &PAYLOAD, &GRAVITY, &mut g);
         for (t, g) in tau.iter().zip(&g) {
             assert!((t + g).abs() < 1e-10, "{t} against {}", -g);
+        }
+    }
+
+    /// The pass from rest gives the general pass's mass-matrix columns: bit for bit at postures without exact
+    /// zeros, in value at the zero posture (whose world axes have exact zero components).
+    #[test]
+    fn a_mass_matrix_column_is_the_general_pass_from_rest() {
+        let chain = iiwa();
+        let (zero, none) = ([0.0; 7], Vector3::zeros());
+        let other = [-1.1, 0.4, -2.0, -0.3, 1.7, -1.2, 2.5];
+        for (q, payload, bits) in [
+            (Q, PAYLOAD, true),
+            (other, Payload::NONE, true),
+            (zero, PAYLOAD, false),
+        ] {
+            let mut frames = Frames::new(&chain);
+            forward_kinematics(&chain, &q, &mut frames);
+            let mut ws = Workspace::new(&chain);
+            let (mut general, mut column) = (vec![0.0; 7], vec![0.0; 7]);
+            for j in 0..7 {
+                let mut unit = [0.0; 7];
+                unit[j] = 1.0;
+                inverse_dynamics(
+                    &chain,
+                    &frames,
+                    &payload,
+                    &none,
+                    &zero,
+                    &unit,
+                    &mut ws,
+                    &mut general,
+                );
+                mass_matrix_column(&chain, &frames, &payload, j, &mut ws, &mut column);
+                for (g, c) in general.iter().zip(&column) {
+                    assert!(
+                        *g == *c && (!bits || g.to_bits() == c.to_bits()),
+                        "column {j}: {g} against {c}"
+                    );
+                }
+            }
         }
     }
 

@@ -40,7 +40,9 @@ use super::history::Visit;
 use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
-use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics, inverse_dynamics_again};
+use crate::robot::inverse_dynamics::{
+    Workspace, inverse_dynamics, inverse_dynamics_again, mass_matrix_column,
+};
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
@@ -235,7 +237,6 @@ impl TrueRobot {
         frames: &mut Frames,
     ) -> Linear {
         let n = self.chain.dof();
-        let zero = vec![0.0; n];
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
@@ -255,23 +256,11 @@ impl TrueRobot {
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
         const ANGLE: f64 = 1e-6;
-        let (mut unit, mut faster, mut q) = (zero.clone(), qd.to_vec(), state.q.clone());
+        let (mut faster, mut q) = (qd.to_vec(), state.q.clone());
         // M and C on the state's frames first, each pass reusing the base pass's geometry; then S, whose passes
         // each have frames of their own.
         for j in 0..n {
-            unit.fill(0.0);
-            unit[j] = 1.0;
-            let none = Vector3::zeros();
-            inverse_dynamics_again(
-                chain,
-                &state.frames,
-                payload,
-                &none,
-                &zero,
-                &unit,
-                ws,
-                &mut ahead,
-            );
+            mass_matrix_column(chain, &state.frames, payload, j, ws, &mut ahead);
             m.column_mut(j).copy_from_slice(&ahead);
             faster.copy_from_slice(qd);
             faster[j] += RATE;
