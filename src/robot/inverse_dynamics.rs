@@ -94,12 +94,24 @@ pub fn inverse_dynamics(
 /// What the passes read of `frames` alone, into `ws`: [`inverse_dynamics`]'s first half, which
 /// [`inverse_dynamics_again`], [`mass_matrix_column`] and [`gravity_moments_again`] then reuse.
 pub fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
+    geometry_from(chain, frames, payload, ws, 0);
+}
+
+/// [`geometry`] of joint `from` and body `from` on, the rest of `ws` kept: after a change of the frames from
+/// body `from` on alone (one joint's angle moved), the geometry of the whole `frames`.
+pub fn geometry_from(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    ws: &mut Workspace,
+    from: usize,
+) {
     let n = chain.dof();
-    for i in 0..n {
+    for i in from..n {
         ws.axis[i] = frames.axis(chain, i);
         ws.anchor[i] = frames.anchor(i).coords;
     }
-    for b in 1..=n {
+    for b in from.max(1)..=n {
         let body = &chain.bodies[b];
         let frame = &frames.body[b];
         let com = frame * body.inertial.com;

@@ -41,7 +41,7 @@ use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
 use crate::robot::inverse_dynamics::{
-    Workspace, inverse_dynamics, inverse_dynamics_again, mass_matrix_column,
+    Workspace, geometry_from, inverse_dynamics, inverse_dynamics_again, mass_matrix_column,
 };
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
@@ -281,8 +281,12 @@ impl TrueRobot {
         for j in 0..n {
             q.copy_from_slice(&state.q);
             q[j] += ANGLE;
-            self.kinematics(&q, &state.tilt, state.scale, frames);
-            inverse_dynamics(chain, frames, payload, gravity, qd, qdd, ws, &mut ahead);
+            // Joint j's angle moves the frames from body j + 1 on: those before, and their geometry, are the
+            // state's (the last column moved body j and joint j's frame; both are computed again).
+            frames.body[j] = state.frames.body[j];
+            self.kinematics_from(&q, &state.tilt, state.scale, frames, j);
+            geometry_from(chain, frames, payload, ws, j);
+            inverse_dynamics_again(chain, frames, payload, gravity, qd, qdd, ws, &mut ahead);
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 s[(i, j)] = (a - b) / ANGLE;
             }

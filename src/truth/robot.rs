@@ -212,15 +212,29 @@ impl TrueRobot {
     /// The true chain's frames at link angles `q`, tilts `tilt` and link lengths × `scale`. Growing every link
     /// translation by one factor scales every frame's position about the base, as a uniformly warm arm does.
     pub fn kinematics(&self, q: &[f64], tilt: &[Vector3<f64>], scale: f64, frames: &mut Frames) {
+        frames.body[0] = self.chain.base;
+        self.kinematics_from(q, tilt, scale, frames, 0);
+    }
+
+    /// [`TrueRobot::kinematics`] from joint `from` on, the frames before it kept: `frames.body[from]` (and the
+    /// frames before) must be those of the same angles before joint `from`, tilts and scale — a joint's angle
+    /// moves no frame before its own body, so a change of `q[from]` alone gives the same frames as a whole pass.
+    pub fn kinematics_from(
+        &self,
+        q: &[f64],
+        tilt: &[Vector3<f64>],
+        scale: f64,
+        frames: &mut Frames,
+        from: usize,
+    ) {
         let tilting = self.tilts() && tilt.len() == q.len();
         if !tilting && scale == 1.0 {
             forward_kinematics(&self.chain, q, frames);
             return;
         }
         let chain = &self.chain;
-        let mut pose = chain.base;
-        frames.body[0] = pose;
-        for (i, (joint, &qi)) in chain.joints.iter().zip(q).enumerate() {
+        let mut pose = frames.body[from];
+        for (i, (joint, &qi)) in chain.joints.iter().zip(q).enumerate().skip(from) {
             let mut origin = joint.origin;
             origin.translation.vector *= scale;
             let mut joint_frame = pose * origin;
