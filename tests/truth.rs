@@ -123,15 +123,16 @@ fn rapier_and_fixed_point_agree_at_the_flange() {
     assert!(sag > 3e-4, "largest flange sag {sag} m");
 }
 
-/// The linearisation's angle columns move one joint at a time: the frames from that joint on, computed again on
-/// the others' (`kinematics_from`), and their geometry (`geometry_from`, the workspace carried from column to
-/// column as the motion's linearisation does) give a whole pass's frames and torques, bit for bit — tilted,
+/// The linearisation's columns move one joint's angle or rate at a time: the frames from that joint on, computed
+/// again on the others' (`kinematics_from`), their geometry (`geometry_from`) and the inverse dynamics from that
+/// joint on (`inverse_dynamics_from`, on the base pass's motion before it), the workspace carried from column to
+/// column as the motion's linearisation does, give a whole pass's frames and torques, bit for bit — tilted,
 /// thermally scaled links.
 #[test]
 fn the_frames_and_torques_from_a_joint_on_are_a_whole_pass() {
     use calibench::robot::Frames;
     use calibench::robot::inverse_dynamics::{
-        Workspace, geometry_from, inverse_dynamics, inverse_dynamics_again,
+        Workspace, geometry_from, inverse_dynamics, inverse_dynamics_from,
     };
     use nalgebra::Vector3;
     let chain = iiwa();
@@ -152,21 +153,17 @@ fn the_frames_and_torques_from_a_joint_on_are_a_whole_pass() {
     let scale = 1.0 + 4e-5;
     let mut base = Frames::new(&chain);
     robot.kinematics(&q, &tilt, scale, &mut base);
-    let (mut whole, mut part) = (Frames::new(&chain), Frames::new(&chain));
-    let (mut ws_whole, mut ws_part) = (Workspace::new(&chain), Workspace::new(&chain));
-    let (mut tau_whole, mut tau_part) = (vec![0.0; 7], vec![0.0; 7]);
     let (chain, load, g) = (&robot.chain, &robot.payload, &robot.gravity);
-    // The workspace holds the state's geometry first, as after the linearisation's base pass.
-    inverse_dynamics(
-        chain,
-        &base,
-        load,
-        g,
-        &qd,
-        &qdd,
-        &mut ws_part,
-        &mut tau_part,
-    );
+    let mut scratch = Workspace::new(chain);
+    let mut whole_pass = |frames: &Frames, qd: &[f64]| -> Vec<u64> {
+        let mut tau = vec![0.0; 7];
+        inverse_dynamics(chain, frames, load, g, qd, &qdd, &mut scratch, &mut tau);
+        tau.iter().map(|t| t.to_bits()).collect()
+    };
+    // The workspace holds the state's geometry and motion first, as after the linearisation's base pass.
+    let (mut ws, mut kept, mut tau) = (Workspace::new(chain), Workspace::new(chain), vec![0.0; 7]);
+    inverse_dynamics(chain, &base, load, g, &qd, &qdd, &mut ws, &mut tau);
+    kept.copy_motion_from(&ws, 7);
     let bits = |f: &Frames| -> Vec<u64> {
         f.body
             .iter()
@@ -179,44 +176,42 @@ fn the_frames_and_torques_from_a_joint_on_are_a_whole_pass() {
             .map(f64::to_bits)
             .collect()
     };
+    let (mut whole, mut part) = (Frames::new(chain), Frames::new(chain));
     for j in 0..7 {
         let mut moved = q.clone();
         moved[j] += 1e-6;
         robot.kinematics(&moved, &tilt, scale, &mut whole);
         part.body[j] = base.body[j];
         robot.kinematics_from(&moved, &tilt, scale, &mut part, j);
-        inverse_dynamics(
-            chain,
-            &whole,
-            load,
-            g,
-            &qd,
-            &qdd,
-            &mut ws_whole,
-            &mut tau_whole,
-        );
-        geometry_from(chain, &part, load, &mut ws_part, j);
-        inverse_dynamics_again(
-            chain,
-            &part,
-            load,
-            g,
-            &qd,
-            &qdd,
-            &mut ws_part,
-            &mut tau_part,
-        );
+        geometry_from(chain, &part, load, &mut ws, j);
+        ws.copy_motion_from(&kept, j);
+        inverse_dynamics_from(chain, &part, load, &qd, &qdd, &mut ws, &mut tau, j);
         // The joint frames before j are the last column's (not read); the rest must match.
         let (w, p) = (bits(&whole), bits(&part));
         let body = 8 * 7;
-        assert_eq!(w[..body], p[..body], "column {j}: bodies");
+        assert_eq!(w[..body], p[..body], "angle {j}: bodies");
         assert_eq!(
             w[body + 7 * j..],
             p[body + 7 * j..],
-            "column {j}: joints from j, flange"
+            "angle {j}: joints from j on, flange"
         );
-        let t = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(t(&tau_whole), t(&tau_part), "column {j}: torques");
-        assert_ne!(w, bits(&base), "column {j}: the joint moved nothing");
+        let t: Vec<u64> = tau.iter().map(|t| t.to_bits()).collect();
+        assert_eq!(whole_pass(&whole, &qd), t, "angle {j}: torques");
+        assert_ne!(w, bits(&base), "angle {j}: the joint moved nothing");
+    }
+    // A joint's rate, on the state's frames.
+    geometry_from(chain, &base, load, &mut ws, 0);
+    for j in 0..7 {
+        let mut faster = qd.clone();
+        faster[j] += 1e-3;
+        ws.copy_motion_from(&kept, j);
+        inverse_dynamics_from(chain, &base, load, &faster, &qdd, &mut ws, &mut tau, j);
+        let t: Vec<u64> = tau.iter().map(|t| t.to_bits()).collect();
+        assert_eq!(whole_pass(&base, &faster), t, "rate {j}: torques");
+        assert_ne!(
+            whole_pass(&base, &qd),
+            t,
+            "rate {j}: the rate moved nothing"
+        );
     }
 }

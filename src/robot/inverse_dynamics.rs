@@ -53,6 +53,22 @@ impl Workspace {
     }
 }
 
+impl Workspace {
+    /// The velocities, accelerations, forces and moments of `other`'s last pass up to body `upto`, for
+    /// [`inverse_dynamics_from`].
+    pub fn copy_motion_from(&mut self, other: &Workspace, upto: usize) {
+        for (to, from) in [
+            (&mut self.omega, &other.omega),
+            (&mut self.alpha, &other.alpha),
+            (&mut self.accel, &other.accel),
+            (&mut self.force, &other.force),
+            (&mut self.moment, &other.moment),
+        ] {
+            to[..=upto].copy_from_slice(&from[..=upto]);
+        }
+    }
+}
+
 /// Acceleration of the point `p` of a body whose frame origin `o` has acceleration `a`, turning at `omega`
 /// with angular acceleration `alpha`.
 #[inline]
@@ -140,16 +156,35 @@ pub fn inverse_dynamics_again(
     ws: &mut Workspace,
     out: &mut [f64],
 ) {
-    let n = chain.dof();
-    assert!(
-        qd.len() == n && qdd.len() == n && out.len() == n,
-        "velocity, acceleration and output lengths must equal the chain's dof"
-    );
-    // Forward: velocities and accelerations, base to tip.
+    // The base's motion: gravity as an upward acceleration.
     ws.omega[0] = Vector3::zeros();
     ws.alpha[0] = Vector3::zeros();
     ws.accel[0] = -gravity;
-    for i in 0..n {
+    inverse_dynamics_from(chain, frames, payload, qd, qdd, ws, out, 0);
+}
+
+/// [`inverse_dynamics_again`] whose bodies up to body `from` move as in an earlier pass, whose velocities,
+/// accelerations, forces and moments up to there `ws` holds ([`Workspace::copy_motion_from`]): a pass that
+/// differs from it only in joint `from`'s rate or in the frames beyond body `from` (a linearisation's column),
+/// computed from joint `from` on — the bodies before it the same bits.
+#[allow(clippy::too_many_arguments)]
+pub fn inverse_dynamics_from(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    qd: &[f64],
+    qdd: &[f64],
+    ws: &mut Workspace,
+    out: &mut [f64],
+    from: usize,
+) {
+    let n = chain.dof();
+    assert!(
+        qd.len() == n && qdd.len() == n && out.len() == n && from < n,
+        "velocity, acceleration and output lengths must equal the chain's dof"
+    );
+    // Forward: velocities and accelerations, base to tip.
+    for i in from..n {
         let (axis, anchor) = (ws.axis[i], ws.anchor[i]);
         let parent_origin = frames.body[i].translation.vector;
         let origin = frames.body[i + 1].translation.vector;
@@ -176,7 +211,7 @@ pub fn inverse_dynamics_again(
         }
     }
     // Per body: the force and the moment about its centre of mass that move it.
-    for b in 1..=n {
+    for b in from + 1..=n {
         let m = chain.bodies[b].inertial.mass;
         let a_com = point_accel(&ws.accel[b], &ws.omega[b], &ws.alpha[b], &ws.com_offset[b]);
         let inertia = &ws.inertia[b];

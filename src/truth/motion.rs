@@ -41,7 +41,7 @@ use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
 use crate::robot::inverse_dynamics::{
-    Workspace, geometry_from, inverse_dynamics, inverse_dynamics_again, mass_matrix_column,
+    Workspace, geometry_from, inverse_dynamics, inverse_dynamics_from, mass_matrix_column,
 };
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
@@ -233,10 +233,12 @@ impl TrueRobot {
         qd: &[f64],
         qdd: &[f64],
         damping: &[f64],
-        ws: &mut Workspace,
+        workspaces: &mut [Workspace; 2],
         frames: &mut Frames,
     ) -> Linear {
         let n = self.chain.dof();
+        // The passes' workspace, and the base pass's motion, which each column's pass shares up to its joint.
+        let [ws, kept] = workspaces;
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
@@ -252,6 +254,7 @@ impl TrueRobot {
             ws,
             &mut base,
         );
+        kept.copy_motion_from(ws, n);
         // Forward differences: their error (a step's share of the curvature) is a millionth of the sensitivity,
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
@@ -264,15 +267,16 @@ impl TrueRobot {
             m.column_mut(j).copy_from_slice(&ahead);
             faster.copy_from_slice(qd);
             faster[j] += RATE;
-            inverse_dynamics_again(
+            ws.copy_motion_from(kept, j);
+            inverse_dynamics_from(
                 chain,
                 &state.frames,
                 payload,
-                gravity,
                 &faster,
                 qdd,
                 ws,
                 &mut ahead,
+                j,
             );
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 c[(i, j)] = (a - b) / RATE;
@@ -286,7 +290,8 @@ impl TrueRobot {
             frames.body[j] = state.frames.body[j];
             self.kinematics_from(&q, &state.tilt, state.scale, frames, j);
             geometry_from(chain, frames, payload, ws, j);
-            inverse_dynamics_again(chain, frames, payload, gravity, qd, qdd, ws, &mut ahead);
+            ws.copy_motion_from(kept, j);
+            inverse_dynamics_from(chain, frames, payload, qd, qdd, ws, &mut ahead, j);
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 s[(i, j)] = (a - b) / ANGLE;
             }
@@ -321,7 +326,8 @@ struct Walk<'a> {
     linear: Linear,
     /// The command at the current node.
     point: PathPoint,
-    ws: Workspace,
+    /// The linearisation's workspaces: its passes', its base pass's motion.
+    ws: [Workspace; 2],
     frames: Frames,
 }
 
@@ -392,7 +398,7 @@ impl Walk<'_> {
                 s: zeros(),
             },
             point: PathPoint::default(),
-            ws: Workspace::new(&robot.chain),
+            ws: [Workspace::new(&robot.chain), Workspace::new(&robot.chain)],
             frames: Frames::new(&robot.chain),
         }
     }
