@@ -10,6 +10,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::chain::{Chain, JointKind, Payload};
+use super::dynamics::{GravityJoint, gravity_pass_full};
 use super::kinematics::Frames;
 
 /// Per-call workspace of [`inverse_dynamics`].
@@ -52,6 +53,22 @@ impl Workspace {
     }
 }
 
+impl Workspace {
+    /// The velocities, accelerations, forces and moments of `other`'s last pass up to body `upto`, for
+    /// [`inverse_dynamics_from`].
+    pub fn copy_motion_from(&mut self, other: &Workspace, upto: usize) {
+        for (to, from) in [
+            (&mut self.omega, &other.omega),
+            (&mut self.alpha, &other.alpha),
+            (&mut self.accel, &other.accel),
+            (&mut self.force, &other.force),
+            (&mut self.moment, &other.moment),
+        ] {
+            to[..=upto].copy_from_slice(&from[..=upto]);
+        }
+    }
+}
+
 /// Acceleration of the point `p` of a body whose frame origin `o` has acceleration `a`, turning at `omega`
 /// with angular acceleration `alpha`.
 #[inline]
@@ -90,14 +107,27 @@ pub fn inverse_dynamics(
     inverse_dynamics_again(chain, frames, payload, gravity, qd, qdd, ws, out);
 }
 
-/// What the passes read of `frames` alone, into `ws`.
-fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
+/// What the passes read of `frames` alone, into `ws`: [`inverse_dynamics`]'s first half, which
+/// [`inverse_dynamics_again`], [`mass_matrix_column`] and [`gravity_moments_again`] then reuse.
+pub fn geometry(chain: &Chain, frames: &Frames, payload: &Payload, ws: &mut Workspace) {
+    geometry_from(chain, frames, payload, ws, 0);
+}
+
+/// [`geometry`] of joint `from` and body `from` on, the rest of `ws` kept: after a change of the frames from
+/// body `from` on alone (one joint's angle moved), the geometry of the whole `frames`.
+pub fn geometry_from(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    ws: &mut Workspace,
+    from: usize,
+) {
     let n = chain.dof();
-    for i in 0..n {
+    for i in from..n {
         ws.axis[i] = frames.axis(chain, i);
         ws.anchor[i] = frames.anchor(i).coords;
     }
-    for b in 1..=n {
+    for b in from.max(1)..=n {
         let body = &chain.bodies[b];
         let frame = &frames.body[b];
         let com = frame * body.inertial.com;
@@ -126,16 +156,35 @@ pub fn inverse_dynamics_again(
     ws: &mut Workspace,
     out: &mut [f64],
 ) {
-    let n = chain.dof();
-    assert!(
-        qd.len() == n && qdd.len() == n && out.len() == n,
-        "velocity, acceleration and output lengths must equal the chain's dof"
-    );
-    // Forward: velocities and accelerations, base to tip.
+    // The base's motion: gravity as an upward acceleration.
     ws.omega[0] = Vector3::zeros();
     ws.alpha[0] = Vector3::zeros();
     ws.accel[0] = -gravity;
-    for i in 0..n {
+    inverse_dynamics_from(chain, frames, payload, qd, qdd, ws, out, 0);
+}
+
+/// [`inverse_dynamics_again`] whose bodies up to body `from` move as in an earlier pass, whose velocities,
+/// accelerations, forces and moments up to there `ws` holds ([`Workspace::copy_motion_from`]): a pass that
+/// differs from it only in joint `from`'s rate or in the frames beyond body `from` (a linearisation's column),
+/// computed from joint `from` on — the bodies before it the same bits.
+#[allow(clippy::too_many_arguments)]
+pub fn inverse_dynamics_from(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    qd: &[f64],
+    qdd: &[f64],
+    ws: &mut Workspace,
+    out: &mut [f64],
+    from: usize,
+) {
+    let n = chain.dof();
+    assert!(
+        qd.len() == n && qdd.len() == n && out.len() == n && from < n,
+        "velocity, acceleration and output lengths must equal the chain's dof"
+    );
+    // Forward: velocities and accelerations, base to tip.
+    for i in from..n {
         let (axis, anchor) = (ws.axis[i], ws.anchor[i]);
         let parent_origin = frames.body[i].translation.vector;
         let origin = frames.body[i + 1].translation.vector;
@@ -162,7 +211,7 @@ pub fn inverse_dynamics_again(
         }
     }
     // Per body: the force and the moment about its centre of mass that move it.
-    for b in 1..=n {
+    for b in from + 1..=n {
         let m = chain.bodies[b].inertial.mass;
         let a_com = point_accel(&ws.accel[b], &ws.omega[b], &ws.alpha[b], &ws.com_offset[b]);
         let inertia = &ws.inertia[b];
@@ -205,10 +254,120 @@ pub fn inverse_dynamics_again(
     }
 }
 
+/// [`super::dynamics::gravity_moments`] on the geometry in `ws` (the last [`geometry`] call's, on the same
+/// `frames`): the centres of mass, axes and anchors that pass computes are those [`geometry`] computed, by the
+/// same expressions, so the torques and moments are the same bits without computing them twice (a moving arm's
+/// fixed point needs both the gravity moments and the inverse dynamics of each iterate).
+pub fn gravity_moments_again(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    ws: &Workspace,
+    torques: &mut [f64],
+    moments: &mut [Vector3<f64>],
+) {
+    assert!(
+        torques.len() == chain.dof() && moments.len() == chain.dof(),
+        "output lengths must equal the chain's dof"
+    );
+    gravity_pass_full(
+        payload,
+        &frames.flange,
+        gravity,
+        torques,
+        Some(moments),
+        |i| GravityJoint {
+            mass: chain.bodies[i + 1].inertial.mass,
+            com: Point3::from(ws.com[i + 1]),
+            axis: ws.axis[i],
+            anchor: Point3::from(ws.anchor[i]),
+            prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
+        },
+    );
+}
+
+/// Column `j` of the mass matrix on the geometry in `ws` (the last [`geometry`] call's, on the same `frames`):
+/// [`inverse_dynamics_again`] from rest (`q̇ = 0`), without gravity, at a unit acceleration of joint `j`, with
+/// the terms that are then exact zeros left out — the angular velocities, the Coriolis and centripetal terms, and
+/// the bodies before joint `j`, which stay at rest. Leaving out an addition of ±0 changes no nonzero result, so
+/// every entry equals the general pass's, bit for bit but for the sign of an entry that is exactly zero.
+pub fn mass_matrix_column(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    j: usize,
+    ws: &mut Workspace,
+    out: &mut [f64],
+) {
+    let n = chain.dof();
+    assert!(
+        j < n && out.len() == n,
+        "the column must be a joint and the output's length the chain's dof"
+    );
+    // Forward from joint j: the bodies before it at rest, those beyond turning at joint j's unit acceleration.
+    let (mut alpha, mut accel) = (Vector3::zeros(), Vector3::zeros());
+    for i in j..n {
+        let (axis, anchor) = (ws.axis[i], ws.anchor[i]);
+        let parent_origin = frames.body[i].translation.vector;
+        let origin = frames.body[i + 1].translation.vector;
+        let a_anchor = accel + alpha.cross(&(anchor - parent_origin));
+        match chain.joints[i].kind {
+            JointKind::Revolute => {
+                if i == j {
+                    alpha += axis;
+                }
+                accel = a_anchor + alpha.cross(&(origin - anchor));
+            }
+            JointKind::Prismatic => {
+                accel = a_anchor + alpha.cross(&(origin - anchor));
+                if i == j {
+                    accel += axis;
+                }
+            }
+        }
+        ws.alpha[i + 1] = alpha;
+        ws.accel[i + 1] = accel;
+    }
+    for b in j + 1..=n {
+        let m = chain.bodies[b].inertial.mass;
+        let a_com = ws.accel[b] + ws.alpha[b].cross(&ws.com_offset[b]);
+        ws.force[b] = a_com * m;
+        ws.moment[b] = ws.inertia[b] * ws.alpha[b];
+    }
+    // Backward, as in the general pass; the bodies at rest add nothing.
+    let mut f = Vector3::zeros();
+    let mut n_about_origin = Vector3::zeros();
+    let mut reduced_at = frames.flange.translation.vector;
+    if payload.mass > 0.0 {
+        let p = ws.payload_com;
+        let origin = frames.body[n].translation.vector;
+        let a = ws.accel[n] + ws.alpha[n].cross(&(p - origin));
+        f = a * payload.mass;
+        reduced_at = p;
+    }
+    for i in (0..n).rev() {
+        let b = i + 1;
+        let anchor = ws.anchor[i];
+        n_about_origin += (reduced_at - anchor).cross(&f);
+        if b > j {
+            n_about_origin =
+                n_about_origin + ws.moment[b] + (ws.com[b] - anchor).cross(&ws.force[b]);
+            f += ws.force[b];
+        }
+        reduced_at = anchor;
+        let axis = ws.axis[i];
+        out[i] = match chain.joints[i].kind {
+            JointKind::Revolute => axis.dot(&n_about_origin),
+            JointKind::Prismatic => axis.dot(&f),
+        };
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::robot::dynamics::{GRAVITY, gravity_torques};
+    use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
     use crate::robot::forward_kinematics;
     use nalgebra::DMatrix;
 
@@ -250,6 +409,66 @@ mod tests {
         gravity_torques(&chain, &frames, &PAYLOAD, &GRAVITY, &mut g);
         for (t, g) in tau.iter().zip(&g) {
             assert!((t + g).abs() < 1e-10, "{t} against {}", -g);
+        }
+    }
+
+    /// The pass from rest gives the general pass's mass-matrix columns: bit for bit at postures without exact
+    /// zeros, in value at the zero posture (whose world axes have exact zero components).
+    #[test]
+    fn a_mass_matrix_column_is_the_general_pass_from_rest() {
+        let chain = iiwa();
+        let (zero, none) = ([0.0; 7], Vector3::zeros());
+        let other = [-1.1, 0.4, -2.0, -0.3, 1.7, -1.2, 2.5];
+        for (q, payload, bits) in [
+            (Q, PAYLOAD, true),
+            (other, Payload::NONE, true),
+            (zero, PAYLOAD, false),
+        ] {
+            let mut frames = Frames::new(&chain);
+            forward_kinematics(&chain, &q, &mut frames);
+            let mut ws = Workspace::new(&chain);
+            let (mut general, mut column) = (vec![0.0; 7], vec![0.0; 7]);
+            for j in 0..7 {
+                let mut unit = [0.0; 7];
+                unit[j] = 1.0;
+                inverse_dynamics(
+                    &chain,
+                    &frames,
+                    &payload,
+                    &none,
+                    &zero,
+                    &unit,
+                    &mut ws,
+                    &mut general,
+                );
+                mass_matrix_column(&chain, &frames, &payload, j, &mut ws, &mut column);
+                for (g, c) in general.iter().zip(&column) {
+                    assert!(
+                        *g == *c && (!bits || g.to_bits() == c.to_bits()),
+                        "column {j}: {g} against {c}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The gravity pass on the inverse dynamics' geometry is `gravity_moments`, bit for bit.
+    #[test]
+    fn gravity_moments_on_the_geometry_are_the_same_bits() {
+        let chain = iiwa();
+        let mut frames = Frames::new(&chain);
+        forward_kinematics(&chain, &Q, &mut frames);
+        let mut ws = Workspace::new(&chain);
+        geometry(&chain, &frames, &PAYLOAD, &mut ws);
+        let (mut t0, mut t1) = (vec![0.0; 7], vec![0.0; 7]);
+        let (mut m0, mut m1) = (vec![Vector3::zeros(); 7], vec![Vector3::zeros(); 7]);
+        gravity_moments(&chain, &frames, &PAYLOAD, &GRAVITY, &mut t0, &mut m0);
+        gravity_moments_again(&chain, &frames, &PAYLOAD, &GRAVITY, &ws, &mut t1, &mut m1);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&t0), bits(&t1));
+        assert!(t0.iter().filter(|t| t.abs() > 1e-3).count() >= 4, "{t0:?}");
+        for (a, b) in m0.iter().zip(&m1) {
+            assert_eq!(bits(a.as_slice()), bits(b.as_slice()));
         }
     }
 

@@ -40,7 +40,9 @@ use super::history::Visit;
 use super::robot::{Deflection, TrueRobot, TrueState};
 use crate::error::{Error, Result};
 use crate::robot::Frames;
-use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics, inverse_dynamics_again};
+use crate::robot::inverse_dynamics::{
+    Workspace, geometry_from, inverse_dynamics, inverse_dynamics_from, mass_matrix_column,
+};
 
 /// The longest step of the deflection's integration (s). The slowest modes of an arm's joints (11–14 Hz for
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
@@ -231,11 +233,12 @@ impl TrueRobot {
         qd: &[f64],
         qdd: &[f64],
         damping: &[f64],
-        ws: &mut Workspace,
+        workspaces: &mut [Workspace; 2],
         frames: &mut Frames,
     ) -> Linear {
         let n = self.chain.dof();
-        let zero = vec![0.0; n];
+        // The passes' workspace, and the base pass's motion, which each column's pass shares up to its joint.
+        let [ws, kept] = workspaces;
         let mut m = DMatrix::zeros(n, n);
         let mut c = DMatrix::zeros(n, n);
         let mut s = DMatrix::zeros(n, n);
@@ -251,39 +254,29 @@ impl TrueRobot {
             ws,
             &mut base,
         );
+        kept.copy_motion_from(ws, n);
         // Forward differences: their error (a step's share of the curvature) is a millionth of the sensitivity,
         // below what the remainder needs.
         const RATE: f64 = 1e-3;
         const ANGLE: f64 = 1e-6;
-        let (mut unit, mut faster, mut q) = (zero.clone(), qd.to_vec(), state.q.clone());
+        let (mut faster, mut q) = (qd.to_vec(), state.q.clone());
         // M and C on the state's frames first, each pass reusing the base pass's geometry; then S, whose passes
         // each have frames of their own.
         for j in 0..n {
-            unit.fill(0.0);
-            unit[j] = 1.0;
-            let none = Vector3::zeros();
-            inverse_dynamics_again(
-                chain,
-                &state.frames,
-                payload,
-                &none,
-                &zero,
-                &unit,
-                ws,
-                &mut ahead,
-            );
+            mass_matrix_column(chain, &state.frames, payload, j, ws, &mut ahead);
             m.column_mut(j).copy_from_slice(&ahead);
             faster.copy_from_slice(qd);
             faster[j] += RATE;
-            inverse_dynamics_again(
+            ws.copy_motion_from(kept, j);
+            inverse_dynamics_from(
                 chain,
                 &state.frames,
                 payload,
-                gravity,
                 &faster,
                 qdd,
                 ws,
                 &mut ahead,
+                j,
             );
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 c[(i, j)] = (a - b) / RATE;
@@ -292,8 +285,13 @@ impl TrueRobot {
         for j in 0..n {
             q.copy_from_slice(&state.q);
             q[j] += ANGLE;
-            self.kinematics(&q, &state.tilt, state.scale, frames);
-            inverse_dynamics(chain, frames, payload, gravity, qd, qdd, ws, &mut ahead);
+            // Joint j's angle moves the frames from body j + 1 on: those before, and their geometry, are the
+            // state's (the last column moved body j and joint j's frame; both are computed again).
+            frames.body[j] = state.frames.body[j];
+            self.kinematics_from(&q, &state.tilt, state.scale, frames, j);
+            geometry_from(chain, frames, payload, ws, j);
+            ws.copy_motion_from(kept, j);
+            inverse_dynamics_from(chain, frames, payload, qd, qdd, ws, &mut ahead, j);
             for (i, (a, b)) in ahead.iter().zip(&base).enumerate() {
                 s[(i, j)] = (a - b) / ANGLE;
             }
@@ -328,7 +326,8 @@ struct Walk<'a> {
     linear: Linear,
     /// The command at the current node.
     point: PathPoint,
-    ws: Workspace,
+    /// The linearisation's workspaces: its passes', its base pass's motion.
+    ws: [Workspace; 2],
     frames: Frames,
 }
 
@@ -399,7 +398,7 @@ impl Walk<'_> {
                 s: zeros(),
             },
             point: PathPoint::default(),
-            ws: Workspace::new(&robot.chain),
+            ws: [Workspace::new(&robot.chain), Workspace::new(&robot.chain)],
             frames: Frames::new(&robot.chain),
         }
     }

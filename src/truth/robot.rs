@@ -18,7 +18,9 @@ use super::perturbation::Perturbation;
 use super::stiffness::tilt;
 use crate::error::{Error, Result};
 use crate::robot::dynamics::{GRAVITY, gravity_moments, gravity_torques};
-use crate::robot::inverse_dynamics::{Workspace, inverse_dynamics};
+use crate::robot::inverse_dynamics::{
+    Workspace, geometry, gravity_moments_again, inverse_dynamics, inverse_dynamics_again,
+};
 use crate::robot::kinematics::forward_kinematics;
 use crate::robot::{Chain, Frames, Inertial, JointKind, Payload};
 
@@ -210,15 +212,29 @@ impl TrueRobot {
     /// The true chain's frames at link angles `q`, tilts `tilt` and link lengths × `scale`. Growing every link
     /// translation by one factor scales every frame's position about the base, as a uniformly warm arm does.
     pub fn kinematics(&self, q: &[f64], tilt: &[Vector3<f64>], scale: f64, frames: &mut Frames) {
+        frames.body[0] = self.chain.base;
+        self.kinematics_from(q, tilt, scale, frames, 0);
+    }
+
+    /// [`TrueRobot::kinematics`] from joint `from` on, the frames before it kept: `frames.body[from]` (and the
+    /// frames before) must be those of the same angles before joint `from`, tilts and scale — a joint's angle
+    /// moves no frame before its own body, so a change of `q[from]` alone gives the same frames as a whole pass.
+    pub fn kinematics_from(
+        &self,
+        q: &[f64],
+        tilt: &[Vector3<f64>],
+        scale: f64,
+        frames: &mut Frames,
+        from: usize,
+    ) {
         let tilting = self.tilts() && tilt.len() == q.len();
         if !tilting && scale == 1.0 {
             forward_kinematics(&self.chain, q, frames);
             return;
         }
         let chain = &self.chain;
-        let mut pose = chain.base;
-        frames.body[0] = pose;
-        for (i, (joint, &qi)) in chain.joints.iter().zip(q).enumerate() {
+        let mut pose = frames.body[from];
+        for (i, (joint, &qi)) in chain.joints.iter().zip(q).enumerate().skip(from) {
             let mut origin = joint.origin;
             origin.translation.vector *= scale;
             let mut joint_frame = pose * origin;
@@ -335,37 +351,45 @@ impl TrueRobot {
         let tilting = self.tilts();
         for iter in 1..=FIXED_POINT_MAX_ITERS {
             self.kinematics(&state.q, &state.tilt, state.scale, &mut state.frames);
-            if tilting {
-                gravity_moments(
-                    &self.chain,
-                    &state.frames,
-                    &self.payload,
+            let (chain, frames, payload) = (&self.chain, &state.frames, &self.payload);
+            match motion {
+                Some((qd, qdd)) => {
+                    // The frames' centres of mass, axes and anchors once for the gravity moments (tilt) and
+                    // the inverse dynamics; the torque is the latter's.
+                    geometry(chain, frames, payload, &mut state.dynamics);
+                    if tilting {
+                        gravity_moments_again(
+                            chain,
+                            frames,
+                            payload,
+                            &self.gravity,
+                            &state.dynamics,
+                            &mut state.tau,
+                            &mut state.moments,
+                        );
+                    }
+                    // What the load applies to the joint is minus what the joint must supply to move it.
+                    inverse_dynamics_again(
+                        chain,
+                        frames,
+                        payload,
+                        &self.gravity,
+                        qd,
+                        qdd,
+                        &mut state.dynamics,
+                        &mut state.tau,
+                    );
+                    state.tau.iter_mut().for_each(|t| *t = -*t);
+                }
+                None if tilting => gravity_moments(
+                    chain,
+                    frames,
+                    payload,
                     &self.gravity,
                     &mut state.tau,
                     &mut state.moments,
-                );
-            } else if motion.is_none() {
-                gravity_torques(
-                    &self.chain,
-                    &state.frames,
-                    &self.payload,
-                    &self.gravity,
-                    &mut state.tau,
-                );
-            }
-            if let Some((qd, qdd)) = motion {
-                // What the load applies to the joint is minus what the joint must supply to move it.
-                inverse_dynamics(
-                    &self.chain,
-                    &state.frames,
-                    &self.payload,
-                    &self.gravity,
-                    qd,
-                    qdd,
-                    &mut state.dynamics,
-                    &mut state.tau,
-                );
-                state.tau.iter_mut().for_each(|t| *t = -*t);
+                ),
+                None => gravity_torques(chain, frames, payload, &self.gravity, &mut state.tau),
             }
             let mut step: f64 = 0.0;
             for (i, ((q, q0), tau)) in state
