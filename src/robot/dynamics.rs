@@ -111,6 +111,21 @@ pub fn gravity_moments(
     torques: &mut [f64],
     moments: &mut [Vector3<f64>],
 ) {
+    gravity_moments_of(chain, frames, payload, gravity, torques, moments, |i| {
+        GravityJoint::of(chain, frames, i)
+    });
+}
+
+/// [`gravity_moments`] with each joint's mass, centre of mass, axis and anchor from `joint`.
+pub fn gravity_moments_of(
+    chain: &Chain,
+    frames: &Frames,
+    payload: &Payload,
+    gravity: &Vector3<f64>,
+    torques: &mut [f64],
+    moments: &mut [Vector3<f64>],
+    joint: impl Fn(usize) -> GravityJoint,
+) {
     assert!(
         torques.len() == chain.dof() && moments.len() == chain.dof(),
         "output lengths must equal the chain's dof"
@@ -121,7 +136,7 @@ pub fn gravity_moments(
         gravity,
         torques,
         Some(moments),
-        |i| GravityJoint::of(chain, frames, i),
+        joint,
     );
 }
 

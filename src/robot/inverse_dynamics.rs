@@ -10,7 +10,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::chain::{Chain, JointKind, Payload};
-use super::dynamics::{GravityJoint, gravity_pass_full};
+use super::dynamics::{GravityJoint, gravity_moments_of};
 use super::kinematics::Frames;
 
 /// Per-call workspace of [`inverse_dynamics`].
@@ -246,11 +246,7 @@ pub fn inverse_dynamics_from(
             + (com - anchor).cross(&ws.force[b]);
         f += ws.force[b];
         reduced_at = anchor;
-        let axis = ws.axis[i];
-        out[i] = match chain.joints[i].kind {
-            JointKind::Revolute => axis.dot(&n_about_origin),
-            JointKind::Prismatic => axis.dot(&f),
-        };
+        out[i] = along_joint(chain.joints[i].kind, &ws.axis[i], &n_about_origin, &f);
     }
 }
 
@@ -267,24 +263,15 @@ pub fn gravity_moments_again(
     torques: &mut [f64],
     moments: &mut [Vector3<f64>],
 ) {
-    assert!(
-        torques.len() == chain.dof() && moments.len() == chain.dof(),
-        "output lengths must equal the chain's dof"
-    );
-    gravity_pass_full(
-        payload,
-        &frames.flange,
-        gravity,
-        torques,
-        Some(moments),
-        |i| GravityJoint {
+    gravity_moments_of(chain, frames, payload, gravity, torques, moments, |i| {
+        GravityJoint {
             mass: chain.bodies[i + 1].inertial.mass,
             com: Point3::from(ws.com[i + 1]),
             axis: ws.axis[i],
             anchor: Point3::from(ws.anchor[i]),
             prismatic: matches!(chain.joints[i].kind, JointKind::Prismatic),
-        },
-    );
+        }
+    });
 }
 
 /// Column `j` of the mass matrix on the geometry in `ws` (the last [`geometry`] call's, on the same `frames`):
@@ -356,11 +343,21 @@ pub fn mass_matrix_column(
             f += ws.force[b];
         }
         reduced_at = anchor;
-        let axis = ws.axis[i];
-        out[i] = match chain.joints[i].kind {
-            JointKind::Revolute => axis.dot(&n_about_origin),
-            JointKind::Prismatic => axis.dot(&f),
-        };
+        out[i] = along_joint(chain.joints[i].kind, &ws.axis[i], &n_about_origin, &f);
+    }
+}
+
+/// What a joint carries of the moment about its anchor and the force beyond it: the moment along a revolute
+/// joint's axis, the force along a prismatic one's.
+fn along_joint(
+    kind: JointKind,
+    axis: &Vector3<f64>,
+    moment: &Vector3<f64>,
+    force: &Vector3<f64>,
+) -> f64 {
+    match kind {
+        JointKind::Revolute => axis.dot(moment),
+        JointKind::Prismatic => axis.dot(force),
     }
 }
 
