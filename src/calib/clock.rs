@@ -21,6 +21,10 @@
 //! grows with the speed, lost motion does not, and along a path whose speed varies the two separate — 3 ms
 //! comes out 2980 µs with or without lost motion in the truth, at either speed (`tests/trajectory.rs`).
 
+use std::cell::RefCell;
+
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::brent::BrentOpt;
 use nalgebra::{DMatrix, Isometry3, Matrix3xX, Point3, Vector3};
 
 use super::rigid::centre;
@@ -396,78 +400,44 @@ pub fn estimate(dh: &DhChain, data: &Dataset, bound_s: f64) -> Result<ClockOffse
 const TOLERANCE_S: f64 = 0.025e-6;
 
 /// Brent's minimisation of `f` on `[a, b]` (Brent 1973, *Algorithms for Minimization without Derivatives*,
-/// ch. 5): a parabola through the three best points where its vertex falls inside the bracket and the step
-/// shrinks fast enough, a golden-section step otherwise; until the best point is within `2 tol` of the
-/// bracket's middle (the bracket then at most `4 tol` wide), no two evaluations closer than `tol`.
-fn brent(
-    mut f: impl FnMut(f64) -> Result<f64>,
-    (mut a, mut b): (f64, f64),
-    tol: f64,
-) -> Result<f64> {
-    const GOLDEN: f64 = 0.381_966_011_250_105_1; // (3 − √5) / 2
-    let mut x = a + GOLDEN * (b - a);
-    let mut fx = f(x)?;
-    let ((mut w, mut fw), (mut v, mut fv)) = ((x, fx), (x, fx));
-    // The last step and the one before it.
-    let (mut d, mut e) = (0.0f64, 0.0f64);
-    // A parabolic step must be under half the step before last, which keeps the count within a small multiple
-    // of the golden section's (23 from a 5 ms cell to 0.1 µs): 200 bounds it against a non-finite `f`.
-    for _ in 0..200 {
-        let m = 0.5 * (a + b);
-        if (x - m).abs() <= 2.0 * tol - 0.5 * (b - a) {
-            break;
-        }
-        let mut parabolic = false;
-        if e.abs() > tol {
-            let r = (x - w) * (fx - fv);
-            let q = (x - v) * (fx - fw);
-            let (mut p, mut q) = ((x - v) * q - (x - w) * r, 2.0 * (q - r));
-            if q > 0.0 {
-                p = -p;
-            } else {
-                q = -q;
-            }
-            let before = e;
-            e = d;
-            if p.abs() < (0.5 * q * before).abs() && p > q * (a - x) && p < q * (b - x) {
-                d = p / q;
-                if x + d - a < 2.0 * tol || b - (x + d) < 2.0 * tol {
-                    d = tol.copysign(m - x);
-                }
-                parabolic = true;
-            }
-        }
-        if !parabolic {
-            e = if x >= m { a - x } else { b - x };
-            d = GOLDEN * e;
-        }
-        let u = if d.abs() >= tol {
-            x + d
-        } else {
-            x + tol.copysign(d)
-        };
-        let fu = f(u)?;
-        if fu <= fx {
-            if u >= x {
-                a = x;
-            } else {
-                b = x;
-            }
-            ((v, fv), (w, fw), (x, fx)) = ((w, fw), (x, fx), (u, fu));
-        } else {
-            if u < x {
-                a = u;
-            } else {
-                b = u;
-            }
-            if fu <= fw || w == x {
-                ((v, fv), (w, fw)) = ((w, fw), (u, fu));
-            } else if fu <= fv || v == x || v == w {
-                (v, fv) = (u, fu);
-            }
+/// ch. 5; argmin's `BrentOpt`): a parabola through the three best points where its vertex falls inside the
+/// bracket and the step shrinks fast enough, a golden-section step otherwise; until the best point is within
+/// `2 tol` of the bracket's middle (the bracket then at most `4 tol` wide). The first error of `f` ends it.
+fn brent(f: impl FnMut(f64) -> Result<f64>, (a, b): (f64, f64), tol: f64) -> Result<f64> {
+    struct Cost<'a, F> {
+        f: RefCell<F>,
+        error: &'a RefCell<Option<Error>>,
+    }
+    impl<F: FnMut(f64) -> Result<f64>> CostFunction for Cost<'_, F> {
+        type Param = f64;
+        type Output = f64;
+        fn cost(&self, x: &f64) -> std::result::Result<f64, argmin::core::Error> {
+            (self.f.borrow_mut())(*x).map_err(|e| {
+                let message = e.to_string();
+                self.error.borrow_mut().get_or_insert(e);
+                argmin::core::Error::msg(message)
+            })
         }
     }
-    Ok(x)
+    let error = RefCell::new(None);
+    let cost = Cost {
+        f: RefCell::new(f),
+        error: &error,
+    };
+    // The relative tolerance at its floor (√ε · |x| ≈ 5e-11 s at a few milliseconds): `tol` decides.
+    let solver = BrentOpt::new(a, b).set_tolerance(f64::EPSILON.sqrt(), tol);
+    // A parabolic step must be under half the step before last, which keeps the count within a small multiple
+    // of the golden section's (23 from a 5 ms cell to 0.1 µs): 200 bounds it against a non-finite `f`.
+    let run = Executor::new(cost, solver)
+        .configure(|state| state.max_iters(200))
+        .run();
+    let best = run.ok().and_then(|r| r.state().get_best_param().copied());
+    if let Some(e) = error.take() {
+        return Err(e);
+    }
+    best.ok_or_else(|| {
+        Error::Invalid("clock offset: Brent's search found no finite minimum".into())
+    })
 }
 
 /// `data` with each row's joint readings re-evaluated at its time + `offset_s`: what the arm's controller read
