@@ -166,6 +166,9 @@ pub struct FitShare<'d> {
     train: &'d Dataset,
     val: &'d Dataset,
     slots: Mutex<Vec<(&'static str, Arc<dyn Any + Send + Sync>)>>,
+    /// The share of the same points with other extra inputs (or none), whose values that do not read the
+    /// inputs ([`FitContext::shared_without_inputs`]) this one takes instead of computing them again.
+    points_of: Option<&'d FitShare<'d>>,
 }
 
 impl<'d> FitShare<'d> {
@@ -175,7 +178,33 @@ impl<'d> FitShare<'d> {
             train,
             val,
             slots: Mutex::new(Vec::new()),
+            points_of: None,
         }
+    }
+
+    /// Values shared by the fits on `train` and `val`, which are `other`'s sets — the same points, in the
+    /// same order — with other extra inputs (a trajectory campaign's samples with the motion as inputs):
+    /// what does not read the inputs is taken from `other`. Refused (`None`) where the points differ.
+    pub fn beside(
+        other: &'d FitShare<'d>,
+        train: &'d Dataset,
+        val: &'d Dataset,
+    ) -> Option<FitShare<'d>> {
+        let same = |a: &Dataset, b: &Dataset| a.with_other_inputs_is(b);
+        (same(train, other.train) && same(val, other.val)).then(|| FitShare {
+            points_of: Some(other),
+            ..FitShare::new(train, val)
+        })
+    }
+
+    /// The training set this holds.
+    pub fn train(&self) -> &'d Dataset {
+        self.train
+    }
+
+    /// The validation set this holds.
+    pub fn val(&self) -> &'d Dataset {
+        self.val
     }
 
     /// Whether `train` and `val` are the sets this holds (the very values, not equal ones).
@@ -245,6 +274,21 @@ impl<'a> FitContext<'a> {
         }
     }
 
+    /// [`FitContext::shared`] for a value that `make` computes without reading the sets' extra inputs: also
+    /// shared with the fits on the same points with other inputs ([`FitShare::beside`]).
+    pub fn shared_without_inputs<T: Any + Send + Sync>(
+        &self,
+        name: &'static str,
+        train: &Dataset,
+        val: &Dataset,
+        make: impl FnOnce() -> T,
+    ) -> Arc<T> {
+        match self.share {
+            Some(s) if s.holds(train, val) => s.points_of.unwrap_or(s).get(name, make),
+            _ => Arc::new(make()),
+        }
+    }
+
     /// The tracker-frame registration on `train` and `val` ([`Registration::fit`] on the nominal chain),
     /// shared.
     pub fn registration(&self, train: &Dataset, val: &Dataset) -> Result<Registration> {
@@ -259,7 +303,7 @@ impl<'a> FitContext<'a> {
         val: &Dataset,
         fit: impl Fn() -> Result<Registration>,
     ) -> Result<Registration> {
-        match &*self.shared("registration", train, val, &fit) {
+        match &*self.shared_without_inputs("registration", train, val, &fit) {
             Ok(r) => Ok(r.clone()),
             // An error is not shared: the fit says it again.
             Err(_) => fit(),

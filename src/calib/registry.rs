@@ -457,5 +457,29 @@ mod tests {
                 assert_eq!(a.orientation, b.orientation, "{kind:?}");
             }
         }
+
+        // The same points with an extra input (as a trajectory campaign's `+ motion` fits have): fitted
+        // beside the fits above, taking from them what does not read the inputs (the registration, the
+        // kinematic fits under the hybrids, the paper's frames), every model is again the one fitted alone —
+        // its training domain included, which covers the input.
+        let with_input = |d: &Dataset, scale: f64| Dataset {
+            extra_inputs: Some(crate::dataset::ExtraInputs {
+                names: vec!["load".into()],
+                values: d.q.iter().map(|q| vec![scale * q[1].cos()]).collect(),
+            }),
+            ..d.clone()
+        };
+        let (train_in, val_in) = (with_input(&train, 3.0), with_input(&val, 3.0));
+        assert!(FitShare::beside(&share, &val_in, &train_in).is_none());
+        let beside = FitShare::beside(&share, &train_in, &val_in).expect("the same points");
+        let sharing = ctx.sharing(&beside);
+        for kind in MethodKind::ALL {
+            let alone = kind
+                .fit(&ctx, &train_in, &val_in)
+                .unwrap_or_else(|e| panic!("{kind:?}: {e}"));
+            let shared = kind.fit(&sharing, &train_in, &val_in).unwrap();
+            let text = |m: &dyn Fitted| serde_json::to_string(&m.save().unwrap()).unwrap();
+            assert_eq!(text(alone.as_ref()), text(shared.as_ref()), "{kind:?}");
+        }
     }
 }

@@ -240,6 +240,40 @@ impl Dataset {
         self.measured.first().map_or(0, Vec::len)
     }
 
+    /// Whether `other` holds the same points as this, in the same order — everything equal but the extra
+    /// inputs (a value computed from the points alone is then the same for both).
+    pub fn with_other_inputs_is(&self, other: &Dataset) -> bool {
+        let Dataset {
+            origin,
+            joint_names,
+            point_ids,
+            q,
+            measured,
+            nominal_reflectors,
+            nominal_flange,
+            split,
+            regions,
+            measured_orientation,
+            extra_inputs: _,
+            time,
+            rates,
+            base_frame,
+        } = self;
+        *origin == other.origin
+            && *joint_names == other.joint_names
+            && *point_ids == other.point_ids
+            && *q == other.q
+            && *measured == other.measured
+            && *nominal_reflectors == other.nominal_reflectors
+            && *nominal_flange == other.nominal_flange
+            && *split == other.split
+            && *regions == other.regions
+            && *measured_orientation == other.measured_orientation
+            && *time == other.time
+            && *rates == other.rates
+            && *base_frame == other.base_frame
+    }
+
     /// A new dataset with the rows at `indices`, in that order. Panics on an index out of range.
     pub fn subset(&self, indices: &[usize]) -> Dataset {
         fn pick<T: Clone>(v: &[T], indices: &[usize]) -> Vec<T> {

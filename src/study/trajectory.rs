@@ -314,9 +314,14 @@ impl PathContext<'_> {
             truth: None,
             failure: None,
         };
-        let (mut runs, detail) = self.fit_each(job, &template, &samples, &measured);
+        let (train, val) = (
+            samples.data.subset(&samples.train),
+            samples.data.subset(&samples.val),
+        );
+        let share = FitShare::new(&train, &val);
+        let (mut runs, detail) = self.fit_each(job, &template, &samples, &measured, &share);
         if self.study.motion_inputs {
-            match self.fit_with_motion(job, &template, &samples) {
+            match self.fit_with_motion(job, &template, &samples, &share) {
                 Ok(moving) => runs.extend(moving),
                 Err(e) => return failed(e),
             }
@@ -394,14 +399,11 @@ impl PathContext<'_> {
         template: &TrajectoryRun,
         samples: &Samples,
         measured: &TrajectoryCampaign,
+        share: &FitShare,
     ) -> (Vec<TrajectoryRun>, Option<TrajectoryDetail>) {
         let truth = self.truth[job.r];
-        let (train, val) = (
-            samples.data.subset(&samples.train),
-            samples.data.subset(&samples.val),
-        );
-        let share = FitShare::new(&train, &val);
-        let ctx = self.ctx.sharing(&share);
+        let (train, val) = (share.train(), share.val());
+        let ctx = self.ctx.sharing(share);
         let fitted: Vec<(TrajectoryRun, Option<TrajectoryDetail>)> = self
             .config
             .methods
@@ -445,11 +447,14 @@ impl PathContext<'_> {
     }
 
     /// Every method that regresses on extra inputs, fitted again with the motion as inputs, judged at rest.
+    /// What the fits compute from the points alone (the registration, the kinematic fits under the hybrids,
+    /// the paper's flange frames) is taken from the fits without them (`plain`).
     fn fit_with_motion(
         &self,
         job: PathJob,
         template: &TrajectoryRun,
         samples: &Samples,
+        plain: &FitShare,
     ) -> Result<Vec<TrajectoryRun>> {
         let moving = with_motion_inputs(
             &samples.data,
@@ -457,7 +462,8 @@ impl PathContext<'_> {
             &self.ctx.payload,
         )?;
         let (train, val) = (moving.subset(&samples.train), moving.subset(&samples.val));
-        let share = FitShare::new(&train, &val);
+        let share =
+            FitShare::beside(plain, &train, &val).unwrap_or_else(|| FitShare::new(&train, &val));
         let ctx = self.ctx.sharing(&share);
         let truth = self.truth[job.r];
         Ok(self

@@ -142,12 +142,15 @@ impl Method for Kinematic {
 
     fn fit(&self, ctx: &FitContext, train: &Dataset, val: &Dataset) -> Result<Box<dyn Fitted>> {
         // Fitted once for a campaign's runs that share them: this method and the hybrid built on it (its base
-        // fit is this fit, on the same sets). An error is not shared: the fit meets it again.
+        // fit is this fit, on the same sets), with the sets' extra inputs or others (the fit reads none of
+        // them: only the training domain it records does, which is therefore the caller's own). An error is
+        // not shared: the fit meets it again.
         let fit = || KinematicModel::fit(self.elastic, ctx, train, val);
-        let model = match &*ctx.shared(self.info().name, train, val, fit) {
+        let mut model = match &*ctx.shared_without_inputs(self.info().name, train, val, fit) {
             Ok(model) => model.clone(),
             Err(_) => fit()?,
         };
+        model.basis.domain = ctx.domain(train, val);
         Ok(Box::new(model))
     }
 }

@@ -85,7 +85,7 @@ impl PaperModel {
         let Some(kind) = kind else {
             return PaperModel::registered(None, ctx, train, val, None);
         };
-        let frames = ctx.shared("paper frames", train, val, || {
+        let frames = ctx.shared_without_inputs("paper frames", train, val, || {
             ChainFrames::of(ctx.dh, train, val)
         });
         let mut model = PaperModel::registered(Some(kind), ctx, train, val, Some(&frames.flanges))?;
