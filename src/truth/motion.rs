@@ -48,7 +48,8 @@ use crate::robot::inverse_dynamics::{
 /// the iiwa) are then resolved to 0.2 % in frequency by the trapezoidal rule; the fast ones (the wrist's, up to
 /// ~400 Hz) are barely excited by a smooth path and stay near their quasi-static answer. Measured in
 /// `tests/motion.rs` against an f64 integration of the full model, with δ_s and the matrices taken as below:
-/// 1.71 µm at most at 2 ms (the two references are 1.68 µm apart); a 4 ms step missed by 6.9 µm.
+/// 1.71 µm at most at 2 ms (the two references are 1.68 µm apart), nearly all of it the trapezoidal rule's own
+/// error, second order in the step: 3.33 ms missed by 4.8 µm, 4 ms by 5.96 µm (docs/speed.md).
 pub const MOTION_STEP_S: f64 = 2e-3;
 
 /// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`] runs on the grid k · KNOT_S
