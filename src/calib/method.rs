@@ -157,6 +157,9 @@ pub struct FitContext<'a> {
     pub share: Option<&'a FitShare<'a>>,
 }
 
+/// Named values of any type, made once ([`FitShare`]).
+type Slots = Mutex<Vec<(&'static str, Arc<dyn Any + Send + Sync>)>>;
+
 /// What several methods fitted on one pair of training and validation sets (a study's campaign) compute alike,
 /// whatever the method: the tracker-frame registration, the training domain, a family of methods' own
 /// preparation (the paper's candidate rows and their factorizations). The first fit that asks computes a value
@@ -165,7 +168,10 @@ pub struct FitContext<'a> {
 pub struct FitShare<'d> {
     train: &'d Dataset,
     val: &'d Dataset,
-    slots: Mutex<Vec<(&'static str, Arc<dyn Any + Send + Sync>)>>,
+    slots: Slots,
+    /// The values made without reading the sets' extra inputs ([`FitContext::shared_without_inputs`]), apart:
+    /// the fits beside these sets take them, and [`FitShare::drop_what_reads_inputs`] keeps them.
+    without_inputs: Slots,
     /// The share of the same points with other extra inputs (or none), whose values that do not read the
     /// inputs ([`FitContext::shared_without_inputs`]) this one takes instead of computing them again.
     points_of: Option<&'d FitShare<'d>>,
@@ -177,7 +183,8 @@ impl<'d> FitShare<'d> {
         FitShare {
             train,
             val,
-            slots: Mutex::new(Vec::new()),
+            slots: Slots::default(),
+            without_inputs: Slots::default(),
             points_of: None,
         }
     }
@@ -212,20 +219,38 @@ impl<'d> FitShare<'d> {
         std::ptr::eq(train, self.train) && std::ptr::eq(val, self.val)
     }
 
+    /// Drops the values that read the sets' extra inputs (the paper's factorizations, the domain), keeping
+    /// those the fits beside these sets still take: their memory is not held through those fits.
+    pub fn drop_what_reads_inputs(&mut self) {
+        self.slots
+            .get_mut()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clear();
+    }
+
     /// The value named `name` (of type `T`), made by `make` on first use.
     fn get<T: Any + Send + Sync>(&self, name: &'static str, make: impl FnOnce() -> T) -> Arc<T> {
+        Self::get_in(&self.slots, name, make)
+    }
+
+    /// [`FitShare::get`] among `slots`.
+    fn get_in<T: Any + Send + Sync>(
+        slots: &Slots,
+        name: &'static str,
+        make: impl FnOnce() -> T,
+    ) -> Arc<T> {
         let find = |slots: &[(&'static str, Arc<dyn Any + Send + Sync>)]| {
             slots
                 .iter()
                 .filter(|(n, _)| *n == name)
                 .find_map(|(_, v)| v.clone().downcast::<T>().ok())
         };
-        if let Some(v) = find(&self.slots.lock().unwrap_or_else(PoisonError::into_inner)) {
+        if let Some(v) = find(&slots.lock().unwrap_or_else(PoisonError::into_inner)) {
             return v;
         }
         // Made outside the lock: the other fits go on meanwhile, and one that made it too keeps the first.
         let made = Arc::new(make());
-        let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut slots = slots.lock().unwrap_or_else(PoisonError::into_inner);
         find(&slots).unwrap_or_else(|| {
             slots.push((name, made.clone()));
             made
@@ -284,7 +309,9 @@ impl<'a> FitContext<'a> {
         make: impl FnOnce() -> T,
     ) -> Arc<T> {
         match self.share {
-            Some(s) if s.holds(train, val) => s.points_of.unwrap_or(s).get(name, make),
+            Some(s) if s.holds(train, val) => {
+                FitShare::get_in(&s.points_of.unwrap_or(s).without_inputs, name, make)
+            }
             _ => Arc::new(make()),
         }
     }
