@@ -284,6 +284,11 @@ impl<'a> FitContext<'a> {
         }
     }
 
+    /// Whether what fits on `train` and `val` compute is shared with other fits ([`FitShare`]).
+    pub fn shares(&self, train: &Dataset, val: &Dataset) -> bool {
+        self.share.is_some_and(|s| s.holds(train, val))
+    }
+
     /// The value named `name` that `make` computes from `train` and `val` (and this context), computed once
     /// for every fit that shares them ([`FitShare`]).
     pub fn shared<T: Any + Send + Sync>(

@@ -146,6 +146,10 @@ impl Method for Kinematic {
         // them: only the training domain it records does, which is therefore the caller's own). An error is
         // not shared: the fit meets it again.
         let fit = || KinematicModel::fit(self.elastic, ctx, train, val);
+        if !ctx.shares(train, val) {
+            // Fitted here, on these very sets: the domain it records is theirs already.
+            return Ok(Box::new(fit()?));
+        }
         let mut model = match &*ctx.shared_without_inputs(self.info().name, train, val, fit) {
             Ok(model) => model.clone(),
             Err(_) => fit()?,
