@@ -367,3 +367,63 @@ fn a_pilot_in_a_narrow_band_of_shoulder_torque_is_warned_about_and_a_broad_one_i
         assert!(narrow[shoulder].pilot[1] <= narrow[shoulder].reachable[1]);
     }
 }
+
+/// Another arm of another kind: the shipped template's UR5, described by a DH table (`robots/ur5.toml`), warming
+/// up from 20 to 23 °C with a time constant of 1800 s and measured over a wider box than the template's, 200
+/// points. The twin of its pilot carries the warm-up its temperature column shows, and the DH arm's identified
+/// geometry: the uncalibrated error it predicts on the pilot's own folds is the arm's.
+#[test]
+fn the_twin_of_a_dh_arm_warming_up_carries_its_warm_up_and_its_geometry() {
+    let template = std::fs::read_to_string(root().join("scenarios/own_robot_6dof.toml")).unwrap();
+    let mut text = String::new();
+    for line in template.lines() {
+        let key = line.split('=').next().unwrap_or("").trim();
+        text += &match key {
+            "urdf" => format!("urdf = {:?}", root().join("robots/ur5.toml")),
+            "size_m" => "size_m = [0.5, 0.4, 0.35]".into(),
+            "points" => "points = 200".into(),
+            "cone_half_angle_deg" => "cone_half_angle_deg = 25.0".into(),
+            "sizes" => "sizes = [30]".into(),
+            _ => line.to_string(),
+        };
+        text.push('\n');
+    }
+    let scenario = Scenario::parse(&text, "a warming UR5").unwrap();
+    let thermal = scenario.world.truth.thermal.clone().unwrap();
+    let sim = app::simulate(&scenario).unwrap();
+    let dir = TempDir::new().unwrap();
+    let file = dir.path().join("pilot.csv");
+    std::fs::write(&file, measurements::measurements_csv(&sim.campaign).unwrap()).unwrap();
+    let outcome = twin::run(&TwinOptions {
+        robot: root().join("robots/ur5.toml"),
+        payload: scenario.world.robot.payload(),
+        answer_draws: 0,
+        ..options(&file, &dir.path().join("twin"))
+    })
+    .unwrap();
+
+    let (fitted, _) = outcome.values.thermal.clone().expect("a warm-up is fitted");
+    eprintln!("warm-up: fitted {fitted:?}, true {thermal:?}");
+    assert!((fitted.start_c - thermal.start_c).abs() < 0.1, "{fitted:?}");
+    assert!((fitted.end_c - thermal.end_c).abs() < 0.3, "{fitted:?}");
+    let tau = fitted.time_constant_s / thermal.time_constant_s;
+    assert!((0.8..1.25).contains(&tau), "{fitted:?}");
+
+    let mean = |means: Option<f64>| means.expect("the fit holds");
+    let real = outcome
+        .statistics
+        .real
+        .iter()
+        .find(|h| h.method == calibench::calib::registry::REFERENCE)
+        .map(|h| mean(h.mean_mm))
+        .unwrap();
+    let (_, twin) = outcome
+        .statistics
+        .twin
+        .iter()
+        .find(|(m, _)| *m == calibench::calib::registry::REFERENCE)
+        .unwrap();
+    let twin = twin.iter().sum::<f64>() / twin.len() as f64;
+    eprintln!("nominal on the pilot's folds: real {real:.4} mm, twin {twin:.4} mm");
+    assert!((twin / real - 1.0).abs() < 0.15, "real {real}, twin {twin}");
+}
