@@ -393,7 +393,11 @@ fn the_twin_of_a_dh_arm_warming_up_carries_its_warm_up_and_its_geometry() {
     let sim = app::simulate(&scenario).unwrap();
     let dir = TempDir::new().unwrap();
     let file = dir.path().join("pilot.csv");
-    std::fs::write(&file, measurements::measurements_csv(&sim.campaign).unwrap()).unwrap();
+    std::fs::write(
+        &file,
+        measurements::measurements_csv(&sim.campaign).unwrap(),
+    )
+    .unwrap();
     let outcome = twin::run(&TwinOptions {
         robot: root().join("robots/ur5.toml"),
         payload: scenario.world.robot.payload(),
