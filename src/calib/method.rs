@@ -284,9 +284,14 @@ impl<'a> FitContext<'a> {
         }
     }
 
+    /// The share that holds `train` and `val`, if any.
+    fn share_of(&self, train: &Dataset, val: &Dataset) -> Option<&'a FitShare<'a>> {
+        self.share.filter(|s| s.holds(train, val))
+    }
+
     /// Whether what fits on `train` and `val` compute is shared with other fits ([`FitShare`]).
     pub fn shares(&self, train: &Dataset, val: &Dataset) -> bool {
-        self.share.is_some_and(|s| s.holds(train, val))
+        self.share_of(train, val).is_some()
     }
 
     /// The value named `name` that `make` computes from `train` and `val` (and this context), computed once
@@ -298,9 +303,9 @@ impl<'a> FitContext<'a> {
         val: &Dataset,
         make: impl FnOnce() -> T,
     ) -> Arc<T> {
-        match self.share {
-            Some(s) if s.holds(train, val) => s.get(name, make),
-            _ => Arc::new(make()),
+        match self.share_of(train, val) {
+            Some(s) => s.get(name, make),
+            None => Arc::new(make()),
         }
     }
 
@@ -313,11 +318,9 @@ impl<'a> FitContext<'a> {
         val: &Dataset,
         make: impl FnOnce() -> T,
     ) -> Arc<T> {
-        match self.share {
-            Some(s) if s.holds(train, val) => {
-                FitShare::get_in(&s.points_of.unwrap_or(s).without_inputs, name, make)
-            }
-            _ => Arc::new(make()),
+        match self.share_of(train, val) {
+            Some(s) => FitShare::get_in(&s.points_of.unwrap_or(s).without_inputs, name, make),
+            None => Arc::new(make()),
         }
     }
 
