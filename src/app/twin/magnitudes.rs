@@ -89,20 +89,37 @@ pub const DEFAULTS: &[Default] = &[
         unit: "Nm/rad",
         source: "output-bearing moment stiffness 1e5–1e6 Nm/rad (Harmonic Drive CSG-2UH), the middle",
     },
-    Default {
-        key: "truth.stiffness_nm_per_rad",
-        value: 1e5,
-        unit: "Nm/rad",
-        source: "for a joint whose compliance the pilot does not determine: a strain-wave gear's K3 1.2e5–2.5e5 \
-                 Nm/rad (CSG 25–32), lowered for the wrists",
-    },
 ];
 
-pub fn default(key: &str) -> &'static Default {
-    DEFAULTS
-        .iter()
-        .find(|d| d.key == key)
-        .expect("a default of the table")
+/// A joint's stiffness before the pilot, per newton metre of the effort limit its description declares
+/// (Nm/rad per Nm). A joint is sized for its torque, and its gear's stiffness grows with its size; by how much
+/// varies by kind of arm. The real UR10's joints, fitted on each IPA series that determines them (docs/twin.md),
+/// are 200–340 times their URDF's effort limits at the shoulder, 600–1050 at the elbow, 120–570 at wrist 1; the
+/// default scenario's iiwa, a torque sensor in series with each gear, 60–190. The middle of 60–1050 on a
+/// logarithmic scale; the prior's standard deviation, as large as its compliance, leaves the pilot to say which.
+pub const STIFFNESS_PER_EFFORT: f64 = 250.0;
+/// The stiffness before the pilot of a joint whose description declares no effort limit: a strain-wave
+/// gear's K3, 1.2e5–2.5e5 Nm/rad for Harmonic Drive CSG sizes 25–32, lowered for the wrists.
+const STIFFNESS_WITHOUT_EFFORT_NM_PER_RAD: f64 = 1e5;
+
+/// A joint's stiffness before the pilot (Nm/rad) and where it comes from: [`STIFFNESS_PER_EFFORT`] times its
+/// declared effort limit (Nm), or the cited default where it declares none.
+pub fn typical_stiffness(effort_nm: f64) -> (f64, String) {
+    if effort_nm.is_finite() && effort_nm > 0.0 {
+        (
+            STIFFNESS_PER_EFFORT * effort_nm,
+            format!(
+                "{STIFFNESS_PER_EFFORT} × the joint's effort limit of {effort_nm} Nm (arms measured: 60–1050 ×)"
+            ),
+        )
+    } else {
+        (
+            STIFFNESS_WITHOUT_EFFORT_NM_PER_RAD,
+            "a strain-wave gear's K3 1.2e5–2.5e5 Nm/rad (CSG 25–32), lowered for the wrists; the description \
+             declares no effort limit"
+                .into(),
+        )
+    }
 }
 
 /// The tracker's magnitudes a twin assumes: a laser tracker's specification, which a pilot cannot test.

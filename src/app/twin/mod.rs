@@ -69,6 +69,9 @@ pub struct Identified {
     pub geometry_match_m: f64,
     /// Per joint: the compliance (rad/Nm) and its standard deviation, where the pilot determines it.
     pub compliance: Vec<Option<(f64, f64)>>,
+    /// Per joint: the stiffness before the pilot (Nm/rad) and its source ([`magnitudes::typical_stiffness`]),
+    /// the twin's where the pilot does not determine the compliance.
+    pub typical_stiffness: Vec<(f64, String)>,
     /// Per joint: the pilot's range (rad).
     pub ranges: Vec<(f64, f64)>,
 }
@@ -172,7 +175,13 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
     let Parts { train, val, .. } = Parts::of(pilot, labels);
     let fitted = KinematicModel::fit(true, ctx, &train, &val)
         .map_err(|e| e.in_data(&pilot.origin, "identifying the arm (elastic fit)"))?;
-    let (model, raw) = with_prior(fitted);
+    let typical_stiffness: Vec<(f64, String)> = chain
+        .joints
+        .iter()
+        .map(|j| magnitudes::typical_stiffness(j.effort))
+        .collect();
+    let prior: Vec<f64> = typical_stiffness.iter().map(|(k, _)| 1.0 / k).collect();
+    let (model, raw) = with_prior(fitted, &prior);
     let ranges: Vec<(f64, f64)> = (0..chain.dof())
         .map(|j| {
             pilot
@@ -201,6 +210,7 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
         flange,
         geometry_match_m,
         compliance,
+        typical_stiffness,
         ranges,
     })
 }
@@ -211,8 +221,6 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
 /// determines keeps its value.
 const TYPICAL_FRAME_TRANSLATION_M: f64 = 5e-4;
 const TYPICAL_FRAME_ROTATION_RAD: f64 = 1e-3;
-/// A joint's compliance before the pilot (rad/Nm): that of the cited default stiffness, give or take as much.
-const TYPICAL_COMPLIANCE_RAD_PER_NM: f64 = 1e-5;
 
 /// The fit's geometric errors and compliances, each drawn toward its typical value by what its standard
 /// deviation leaves open: the mean of the posterior with a normal prior of the typical size,
@@ -220,9 +228,10 @@ const TYPICAL_COMPLIANCE_RAD_PER_NM: f64 = 1e-5;
 /// size, measured in the pilot's corner of the joint space); taken at face value, the poorly determined ones
 /// act with their full, noisy size wherever the twin is used — on a real UR10, a twin from 200 points of one
 /// series then erred 25–65 % more than the arm on the others. The tracker frame and the mounting are the
-/// registration, not the arm, and stay as fitted. Returns the model and each kept parameter's fitted value and
-/// standard deviation.
-fn with_prior(mut model: KinematicModel) -> (KinematicModel, Vec<(f64, f64)>) {
+/// registration, not the arm, and stay as fitted. A joint's compliance is drawn toward `compliance[j]`, the
+/// inverse of its typical stiffness, give or take as much. Returns the model and each kept parameter's fitted
+/// value and standard deviation.
+fn with_prior(mut model: KinematicModel, compliance: &[f64]) -> (KinematicModel, Vec<(f64, f64)>) {
     use crate::calib::kinematic::Param;
     let raw: Vec<(f64, f64)> = model
         .values
@@ -234,7 +243,7 @@ fn with_prior(mut model: KinematicModel) -> (KinematicModel, Vec<(f64, f64)>) {
         let (prior, tau) = match p {
             Param::Error(e) if e.component <= 3 => (0.0, TYPICAL_FRAME_TRANSLATION_M),
             Param::Error(_) => (0.0, TYPICAL_FRAME_ROTATION_RAD),
-            Param::Compliance(_) => (TYPICAL_COMPLIANCE_RAD_PER_NM, TYPICAL_COMPLIANCE_RAD_PER_NM),
+            Param::Compliance(j) => (compliance[*j], compliance[*j]),
             _ => continue,
         };
         let (v, sigma) = raw[k];
@@ -268,15 +277,14 @@ fn initial_values(
     identified: &Identified,
     real: &[HeldOut],
 ) -> Result<TwinValues> {
-    let stiffness_default = magnitudes::default("truth.stiffness_nm_per_rad").value;
     let stiffness = identified
         .compliance
         .iter()
-        .map(|c| c.map_or(stiffness_default, |(c, _)| 1.0 / c))
+        .zip(&identified.typical_stiffness)
+        .map(|(c, (typical, _))| c.map_or(*typical, |(c, _)| 1.0 / c))
         .collect();
     let mut magnitudes: Vec<Magnitude> = DEFAULTS
         .iter()
-        .filter(|d| d.key != "truth.stiffness_nm_per_rad")
         .map(|d| Magnitude {
             key: d.key.to_string(),
             value: d.value,

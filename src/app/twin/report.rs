@@ -53,7 +53,8 @@ fn json_file(
             }),
             None => json!({
                 "joint": j + 1, "stiffness_nm_per_rad": k,
-                "source": "cited default: the pilot does not determine this joint's compliance",
+                "source": format!("cited default: the pilot does not determine this joint's compliance; {}",
+                    identified.typical_stiffness[j].1),
             }),
         })
         .collect();
