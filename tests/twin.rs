@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 use tempfile::TempDir;
 
 use calibench::app::replay;
+use calibench::app::twin::pilot::Repeats;
 use calibench::app::twin::{self, TwinOptions, TwinOutcome};
 use calibench::calib::kinematic::KinematicModel;
 use calibench::calib::method::FitContext;
@@ -214,6 +215,38 @@ fn the_twin_finds_the_magnitudes_of_what_no_method_models() {
     let loosest = &b.outcome.answer[0];
     assert_eq!(loosest.points.len(), 2);
     assert!(loosest.method.is_some() && loosest.points.iter().all(Option::is_some));
+}
+
+/// The spread of repeated configurations is taken on what the recorded angles do not explain. A real arm
+/// records a repeated configuration a few 1e-5 rad apart and need not move by as much; a twin replays the
+/// recorded angles as motion. Raw points would call the first arm exact and the second noisy; on residuals, the
+/// arm that follows its recorded angles repeats exactly and the one that does not shows that reading's spread.
+#[test]
+fn repeats_are_judged_on_what_the_recorded_angles_do_not_explain() {
+    let chain = calibench::robot::load(root().join("robots/ur10.urdf"), None).unwrap();
+    let probe = nalgebra::Point3::new(0.0, 0.0, 0.1);
+    let configs = configurations();
+    // The 40 repeats recorded 4e-5 rad off on every joint, alternately signed.
+    let mut read = configs.clone();
+    for (i, q) in read.q.iter_mut().enumerate().skip(200) {
+        for (j, v) in q.iter_mut().enumerate() {
+            *v += if (i + j) % 2 == 0 { 4e-5 } else { -4e-5 };
+        }
+    }
+    let spread = |d: &Dataset| {
+        Repeats::of(d, &chain, &probe)
+            .expect("40 configurations measured twice")
+            .mean_distance_m
+    };
+    // Where the arm went: the recorded angles (exactly, without what no method models and without noise).
+    let follows = measured(&read, false);
+    // Where the arm stayed: the first measurements' points, with the angles recorded off.
+    let mut stays = measured(&configs, false);
+    stays.q = read.q.clone();
+    let (follows, stays) = (spread(&follows), spread(&stays));
+    eprintln!("repeats' spread: {follows:.2e} m following the angles, {stays:.2e} m not");
+    assert!(follows < 1e-6, "{follows}");
+    assert!(stays > 1e-5, "{stays}");
 }
 
 #[test]

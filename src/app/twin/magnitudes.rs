@@ -10,6 +10,7 @@
 //! deviation is the statistic's spread over those draws carried through the fit. What the pilot cannot tell
 //! stays at a cited typical value, and says so.
 
+use nalgebra::Point3;
 use serde::Serialize;
 
 use super::pilot::{self, Repeats};
@@ -133,10 +134,11 @@ pub struct Targets {
     pub repeats: Option<Repeats>,
 }
 
-/// The twin's statistics for the magnitudes of `scenario`, over [`SEEDS`] draws: the elastic held-out means
-/// (mm) and the repeats' mean distances (m).
+/// The twin `scenario`'s statistics, over [`SEEDS`] draws: the elastic held-out means (mm) and the repeats' mean
+/// distances (m) with its probe at `probe` (flange frame).
 pub fn simulate(
     scenario: &Scenario,
+    probe: &Point3<f64>,
     pilot: &Dataset,
     ctx: &FitContext,
     seed: u64,
@@ -147,7 +149,7 @@ pub fn simulate(
         let replayed = replay(scenario, pilot, s)?;
         let held = pilot::held_out(&replayed, ctx, &[PHYSICAL], seed);
         elastic.push(held[0].mean_mm.unwrap_or(f64::NAN));
-        if let Some(r) = Repeats::of(&replayed) {
+        if let Some(r) = Repeats::of(&replayed, ctx.chain, probe) {
             repeats.push(r.mean_distance_m);
         }
     }

@@ -134,6 +134,7 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
     let identified = identify(&pilot, &ctx, &chain, options.seed)?;
     let coverage = coverage::torque_coverage(&chain, &dh, options.payload, &pilot.q, options.seed)?;
     let real = pilot::held_out(&pilot, &ctx, &MethodKind::ALL, options.seed);
+    let mut values = initial_values(options, &pilot, &identified, &real)?;
     let targets = Targets {
         elastic_mm: elastic_mean(&real).ok_or_else(|| Error::Data {
             origin: pilot.origin.clone(),
@@ -141,9 +142,8 @@ pub fn run(options: &TwinOptions) -> Result<TwinOutcome> {
                 "the elastic fit fails on the pilot's folds: the pilot cannot identify the arm"
                     .into(),
         })?,
-        repeats: Repeats::of(&pilot),
+        repeats: Repeats::of(&pilot, &chain, &values.probe),
     };
-    let mut values = initial_values(options, &pilot, &identified, &real)?;
     values.thermal = temperature.map(|t| thermal::warm_up(&t, pilot.time.as_deref()));
     fit_magnitudes(&mut values, &pilot, &ctx, &targets, options.seed)?;
     let compliance = compliance::check(&values, &identified, &pilot, &ctx, options.seed)?;
@@ -438,7 +438,7 @@ fn fit_magnitudes(
     let fitted = magnitudes::fit_one(targets.elastic_mm, magnitudes::GEAR_WAVE_START, |x| {
         let mut v = values.clone();
         v.set(key, x);
-        Ok(magnitudes::simulate(&v.scenario()?, pilot, ctx, seed)?.0)
+        Ok(magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed)?.0)
     })?;
     match fitted {
         Some((x, std)) => {
@@ -492,7 +492,7 @@ fn fit_repeatability(
         |x| {
             let mut v = values.clone();
             v.set(key, x);
-            Ok(magnitudes::simulate(&v.scenario()?, pilot, ctx, seed)?.1)
+            Ok(magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed)?.1)
         },
     )?;
     let (value, std, source) = match fitted {
@@ -542,7 +542,8 @@ fn scale_smooth_sources(
         v
     };
     let fitted = magnitudes::fit_one(targets.elastic_mm, 1.0, |s| {
-        magnitudes::simulate(&scaled(values, s).scenario()?, pilot, ctx, seed).map(|r| r.0)
+        let v = scaled(values, s);
+        magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed).map(|r| r.0)
     })?;
     let s = fitted.map_or(0.0, |(s, _)| s.min(1.0));
     *values = scaled(values, s);
@@ -582,7 +583,7 @@ fn statistics(
         {
             means.extend(h.mean_mm);
         }
-        if let Some(r) = Repeats::of(&replayed) {
+        if let Some(r) = Repeats::of(&replayed, ctx.chain, &values.probe) {
             twin_repeats.push(r.mean_distance_m);
         }
     }

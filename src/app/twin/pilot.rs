@@ -5,11 +5,12 @@
 
 use std::path::Path;
 
+use nalgebra::{Point3, Vector3};
 use rand::seq::SliceRandom;
 
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
-use crate::calib::rigid::centre;
+use crate::calib::rigid::register_points;
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
 use crate::dataset::{Dataset, random_train_val};
@@ -18,6 +19,7 @@ use crate::eval::split::Parts;
 use crate::eval::transfer::{self, TestRegistration};
 use crate::rng::{Stream, derive};
 use crate::robot::Chain;
+use crate::robot::kinematics::flange_pose;
 
 /// A pilot with fewer points is refused: four folds of cross-validation must each leave a training set of at
 /// least 40 points and a validation set for the elastic fit's ~40 parameters (three equations a point).
@@ -182,8 +184,13 @@ fn fold_errors(
     Ok(test.errors.position)
 }
 
-/// Configurations measured more than once: how many groups, and the mean distance (m) of a measurement from its
-/// group's mean — the arm's repeatability with the tracker's noise.
+/// Configurations measured more than once: how many groups, and the mean distance (m) of a measurement's
+/// residual from its group's mean residual — the arm's repeatability with the tracker's noise, as the methods
+/// see them. The residual is what the nominal kinematics at the recorded angles, registered onto the
+/// measurements, leaves: a real arm records a repeated configuration a few 1e-5 rad apart, which its position
+/// need not follow (the IPA UR10's series B: 3–10e-5 rad between repeats, while the raw points lie closer
+/// together than those angles put them), and a twin replays the recorded angles as motion; on residuals both
+/// count as what the angles do not explain.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct Repeats {
     pub groups: usize,
@@ -192,8 +199,9 @@ pub struct Repeats {
 }
 
 impl Repeats {
-    /// `None` without a configuration measured twice.
-    pub fn of(data: &Dataset) -> Option<Repeats> {
+    /// `None` without a configuration measured twice, or where the nominal points cannot be registered.
+    /// `probe`: the measured point in the flange frame.
+    pub fn of(data: &Dataset, chain: &Chain, probe: &Point3<f64>) -> Option<Repeats> {
         let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
         for (i, q) in data.q.iter().enumerate() {
             let key = q
@@ -202,16 +210,26 @@ impl Repeats {
                 .collect();
             groups.entry(key).or_default().push(i);
         }
-        let mut distances = Vec::new();
-        let mut n = 0;
-        for members in groups.values().filter(|m| m.len() > 1) {
-            n += 1;
-            let points: Vec<_> = members.iter().map(|&i| data.measured[i][0]).collect();
-            let mean = centre(&points);
-            distances.extend(points.iter().map(|p| (p - mean).norm()));
+        groups.retain(|_, members| members.len() > 1);
+        if groups.is_empty() {
+            return None;
         }
-        (n > 0).then(|| Repeats {
-            groups: n,
+        let nominal: Vec<Point3<f64>> = data
+            .q
+            .iter()
+            .map(|q| flange_pose(chain, q) * probe)
+            .collect();
+        let measured: Vec<Point3<f64>> = data.measured.iter().map(|m| m[0]).collect();
+        let registered = register_points(&nominal, &measured).ok()?.transform;
+        let residual = |i: usize| measured[i] - registered * nominal[i];
+        let mut distances = Vec::new();
+        for members in groups.values() {
+            let mean =
+                members.iter().map(|&i| residual(i)).sum::<Vector3<f64>>() / members.len() as f64;
+            distances.extend(members.iter().map(|&i| (residual(i) - mean).norm()));
+        }
+        Some(Repeats {
+            groups: groups.len(),
             measurements: distances.len(),
             mean_distance_m: distances.iter().sum::<f64>() / distances.len() as f64,
         })
