@@ -10,7 +10,7 @@ use rand::seq::SliceRandom;
 
 use crate::calib::method::FitContext;
 use crate::calib::registry::MethodKind;
-use crate::calib::rigid::register_points;
+use crate::calib::rigid::{centre, register_points};
 use crate::dataset::mapping::ColumnMapping;
 use crate::dataset::range::JointRange;
 use crate::dataset::{Dataset, random_train_val};
@@ -200,7 +200,7 @@ pub struct Repeats {
 
 impl Repeats {
     /// `None` without a configuration measured twice, or where the nominal points cannot be registered.
-    /// `probe`: the measured point in the flange frame.
+    /// `probe`: the measured point (the reflector, or a nest's centre) in the flange frame.
     pub fn of(data: &Dataset, chain: &Chain, probe: &Point3<f64>) -> Option<Repeats> {
         let mut groups: std::collections::BTreeMap<Vec<i64>, Vec<usize>> = Default::default();
         for (i, q) in data.q.iter().enumerate() {
@@ -219,7 +219,7 @@ impl Repeats {
             .iter()
             .map(|q| flange_pose(chain, q) * probe)
             .collect();
-        let measured: Vec<Point3<f64>> = data.measured.iter().map(|m| m[0]).collect();
+        let measured: Vec<Point3<f64>> = data.measured.iter().map(|m| centre(m)).collect();
         let registered = register_points(&nominal, &measured).ok()?.transform;
         let residual = |i: usize| measured[i] - registered * nominal[i];
         let mut distances = Vec::new();
