@@ -69,9 +69,9 @@ pub struct Identified {
     pub geometry_match_m: f64,
     /// Per joint: the compliance (rad/Nm) and its standard deviation, where the pilot determines it.
     pub compliance: Vec<Option<(f64, f64)>>,
-    /// Per joint: the stiffness before the pilot (Nm/rad) and its source ([`magnitudes::typical_stiffness`]),
-    /// the twin's where the pilot does not determine the compliance.
-    pub typical_stiffness: Vec<(f64, String)>,
+    /// Per joint: the twin's stiffness (Nm/rad) where the fit keeps no compliance, and its source
+    /// ([`unkept_stiffness`]).
+    pub unkept_stiffness: Vec<(f64, String)>,
     /// Per joint: the pilot's range (rad).
     pub ranges: Vec<(f64, f64)>,
 }
@@ -175,13 +175,18 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
     let Parts { train, val, .. } = Parts::of(pilot, labels);
     let fitted = KinematicModel::fit(true, ctx, &train, &val)
         .map_err(|e| e.in_data(&pilot.origin, "identifying the arm (elastic fit)"))?;
-    let typical_stiffness: Vec<(f64, String)> = chain
+    let typical: Vec<(f64, String)> = chain
         .joints
         .iter()
         .map(|j| magnitudes::typical_stiffness(j.effort))
         .collect();
-    let prior: Vec<f64> = typical_stiffness.iter().map(|(k, _)| 1.0 / k).collect();
+    let prior: Vec<f64> = typical.iter().map(|(k, _)| 1.0 / k).collect();
     let (model, raw) = with_prior(fitted, &prior);
+    let unkept_stiffness = typical
+        .into_iter()
+        .enumerate()
+        .map(|(j, t)| unkept_stiffness(&model, j, t))
+        .collect();
     let ranges: Vec<(f64, f64)> = (0..chain.dof())
         .map(|j| {
             pilot
@@ -210,9 +215,46 @@ fn identify(pilot: &Dataset, ctx: &FitContext, chain: &Chain, seed: u64) -> Resu
         flange,
         geometry_match_m,
         compliance,
-        typical_stiffness,
+        unkept_stiffness,
         ranges,
     })
+}
+
+/// The twin's stiffness of joint `j` where the fit keeps no compliance for it, and its source. Where the data
+/// pull the compliance below zero and the fit holds it at the bound, the data say the joint is stiff, with the
+/// standard deviation they give: the bound is drawn toward the prior as [`with_prior`] draws a fitted value
+/// (a rigid arm's twin stays rigid). Elsewhere the pilot says nothing of it: the prior's `typical` stiffness.
+fn unkept_stiffness(model: &KinematicModel, j: usize, typical: (f64, String)) -> (f64, String) {
+    let name = crate::calib::kinematic::Param::Compliance(j).name();
+    let bound = model
+        .undetermined
+        .iter()
+        .find(|u| u.parameter == name && u.at_bound);
+    match bound
+        .and_then(|u| u.std)
+        .filter(|s| s.is_finite() && *s > 0.0)
+    {
+        Some(sigma) => {
+            // The posterior mean of 0 ± sigma with the prior mu ± mu.
+            let mu = 1.0 / typical.0;
+            let c = mu * sigma * sigma / (sigma * sigma + mu * mu);
+            (
+                1.0 / c,
+                format!(
+                    "the data pull it below zero; held at 0 ± {sigma:.1e} rad/Nm and drawn toward the prior \
+                     (the stiffness of {}) by that standard deviation: {c:.2e} rad/Nm",
+                    typical.1
+                ),
+            )
+        }
+        None => (
+            typical.0,
+            format!(
+                "cited default: the pilot does not determine this joint's compliance; {}",
+                typical.1
+            ),
+        ),
+    }
 }
 
 /// Typical errors of an arm's joint frames (m, rad), the prior a twin's geometry is drawn toward where the
@@ -280,8 +322,8 @@ fn initial_values(
     let stiffness = identified
         .compliance
         .iter()
-        .zip(&identified.typical_stiffness)
-        .map(|(c, (typical, _))| c.map_or(*typical, |(c, _)| 1.0 / c))
+        .zip(&identified.unkept_stiffness)
+        .map(|(c, (unkept, _))| c.map_or(*unkept, |(c, _)| 1.0 / c))
         .collect();
     let mut magnitudes: Vec<Magnitude> = DEFAULTS
         .iter()

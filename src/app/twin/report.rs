@@ -53,8 +53,7 @@ fn json_file(
             }),
             None => json!({
                 "joint": j + 1, "stiffness_nm_per_rad": k,
-                "source": format!("cited default: the pilot does not determine this joint's compliance; {}",
-                    identified.typical_stiffness[j].1),
+                "source": identified.unkept_stiffness[j].1,
             }),
         })
         .collect();

@@ -306,6 +306,7 @@ fn solve_within_bounds(
                     values[i],
                     sd.map_or(String::new(), |s| format!(" ± {s:.1e}"))
                 ),
+                at_bound: true,
             });
             continue;
         }
@@ -455,6 +456,7 @@ pub(super) fn structurally_dropped(dropped: &[Param]) -> Vec<Undetermined> {
             parameter: p.name(),
             std: None,
             plausible: identify::plausible_size(*p).unwrap_or(0.0),
+            at_bound: false,
             reason: if p.is_compliance() {
                 "gravity and the declared payload load this joint nowhere within the joint limits (its axis \
                  stays vertical, or the masses it carries sit on it), so its compliance deflects nothing the \

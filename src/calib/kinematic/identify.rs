@@ -229,6 +229,10 @@ pub struct Undetermined {
     pub std: Option<f64>,
     pub plausible: f64,
     pub reason: String,
+    /// A compliance the data pull below zero, held at the bound: then `std` is the data's on the bound's
+    /// estimate. Not saved (a fresh fit's, for what builds on the fit: a twin).
+    #[serde(skip)]
+    pub at_bound: bool,
 }
 
 fn unit(p: Param) -> &'static str {
@@ -313,6 +317,7 @@ pub(super) fn determined(
                     std: std.is_finite().then_some(std),
                     plausible: size,
                     reason,
+                    at_bound: false,
                 });
             }
             _ => {
