@@ -249,6 +249,39 @@ fn repeats_are_judged_on_what_the_recorded_angles_do_not_explain() {
     assert!(stays > 1e-5, "{stays}");
 }
 
+/// A tracker quieter than its specification (half the cited noise) and an arm that repeats exactly: the pilot's
+/// repeats lie closer together than the specification's noise alone puts them, and the twin scales the
+/// tracker's noise down to them, within a factor 1.5 of the half.
+#[test]
+fn a_tracker_quieter_than_its_specification_is_found_from_the_repeats() {
+    let text = known_text(true)
+        .replace(
+            &format!("repeatability_rad = {REPEATABILITY_RAD}"),
+            "repeatability_rad = 0.0",
+        )
+        .replace("range_sigma_m = 8e-6", "range_sigma_m = 4e-6")
+        .replace("range_sigma_per_m = 3e-6", "range_sigma_per_m = 1.5e-6")
+        .replace("angle_sigma_rad = 5e-6", "angle_sigma_rad = 2.5e-6");
+    let mut scenario = Scenario::parse(&text, "a quiet tracker").unwrap();
+    let r = replay::replay(&mut scenario, &configurations(), 0).unwrap();
+    let dir = TempDir::new().unwrap();
+    let file = dir.path().join("pilot.csv");
+    std::fs::write(
+        &file,
+        measurements::measurements_csv(&r.sim.campaign).unwrap(),
+    )
+    .unwrap();
+    let outcome = twin::run(&TwinOptions {
+        answer_draws: 0,
+        ..options(&file, &dir.path().join("twin"))
+    })
+    .unwrap();
+    let scale = outcome.values.magnitude("tracker.range_sigma_m") / 8e-6;
+    eprintln!("the tracker's noise: {scale:.3} of the specification, true 0.5");
+    assert!(scale / 0.5 < 1.5 && 0.5 / scale < 1.5, "{scale}");
+    assert_eq!(outcome.values.magnitude("truth.repeatability_rad"), 0.0);
+}
+
 #[test]
 fn the_twin_recovers_the_geometry_and_compliances_within_their_stds() {
     let b = built();

@@ -90,7 +90,34 @@ pub const DEFAULTS: &[Default] = &[
         unit: "Nm/rad",
         source: "output-bearing moment stiffness 1e5–1e6 Nm/rad (Harmonic Drive CSG-2UH), the middle",
     },
+    Default {
+        key: "tracker.range_sigma_m",
+        value: 8e-6,
+        unit: "m",
+        source: TRACKER_NOISE_SOURCE,
+    },
+    Default {
+        key: "tracker.range_sigma_per_m",
+        value: 3e-6,
+        unit: "m/m",
+        source: TRACKER_NOISE_SOURCE,
+    },
+    Default {
+        key: "tracker.angle_sigma_rad",
+        value: 5e-6,
+        unit: "rad",
+        source: TRACKER_NOISE_SOURCE,
+    },
 ];
+
+/// The tracker's random noise: scaled down together where a pilot's repeated configurations lie closer together
+/// than the specification's noise alone puts them.
+pub const TRACKER_NOISE: [&str; 3] = [
+    "tracker.range_sigma_m",
+    "tracker.range_sigma_per_m",
+    "tracker.angle_sigma_rad",
+];
+const TRACKER_NOISE_SOURCE: &str = "Leica AT960 MPE ±(15 µm + 6 µm/m) for a 3-D point taken as 2σ: a specification's bound, the upper end";
 
 /// A joint's stiffness before the pilot, per newton metre of the effort limit its description declares
 /// (Nm/rad per Nm). A joint is sized for its torque, and its gear's stiffness grows with its size; by how much
@@ -123,9 +150,9 @@ pub fn typical_stiffness(effort_nm: f64) -> (f64, String) {
     }
 }
 
-/// The tracker's magnitudes a twin assumes: a laser tracker's specification, which a pilot cannot test.
-pub const TRACKER_SOURCE: &str = "Leica AT960 MPE ±(15 µm + 6 µm/m) for a 3-D point taken as 2σ; systematic \
-     errors within it (Muralikrishnan et al. 2009); T-Mac orientation ±0.01°";
+/// The tracker's magnitudes a twin assumes and a pilot cannot test: a laser tracker's specification.
+pub const TRACKER_SOURCE: &str = "Leica AT960: systematic errors within its MPE (Muralikrishnan et al. 2009); \
+     T-Mac orientation ±0.01°";
 
 /// The pilot's statistics the fit matches: the elastic fit's held-out mean (mm) and the repeats.
 #[derive(Clone, Debug)]

@@ -164,14 +164,21 @@ impl TwinValues {
         let _ = writeln!(
             out,
             "[tracker]   # where the pilot's tracker stood (its registration); a replay places it anew\n\
-             position_m = {:?}\nyaw_deg = {:?}\ntilt_deg = {:?}\n\
-             # {TRACKER_SOURCE}\nrange_sigma_m = 8e-6\nrange_sigma_per_m = 3e-6\nangle_sigma_rad = 5e-6\n\
-             orientation_sigma_rad = 8.7e-5\nacceptance_half_angle_deg = 45.0\nrange_offset_m = 5e-6\n\
-             azimuth_eccentricity_rad = [2e-6, -1e-6]\nelevation_eccentricity_rad = [1e-6, 2e-6]\n\
-             vertical_index_offset_rad = 2e-6\n",
+             position_m = {:?}\nyaw_deg = {:?}\ntilt_deg = {:?}",
             <[f64; 3]>::from(self.tracker.translation.vector),
             yaw.to_degrees(),
             [roll.to_degrees(), pitch.to_degrees()]
+        );
+        for m in &self.magnitudes {
+            if let Some(key) = m.key.strip_prefix("tracker.") {
+                let _ = writeln!(out, "# {}\n{key} = {:?}", m.source, m.value);
+            }
+        }
+        let _ = writeln!(
+            out,
+            "# {TRACKER_SOURCE}\norientation_sigma_rad = 8.7e-5\nacceptance_half_angle_deg = 45.0\n\
+             range_offset_m = 5e-6\nazimuth_eccentricity_rad = [2e-6, -1e-6]\n\
+             elevation_eccentricity_rad = [1e-6, 2e-6]\nvertical_index_offset_rad = 2e-6\n"
         );
         let _ = writeln!(
             out,
