@@ -117,7 +117,8 @@ pub const TRACKER_NOISE: [&str; 3] = [
     "tracker.range_sigma_per_m",
     "tracker.angle_sigma_rad",
 ];
-const TRACKER_NOISE_SOURCE: &str = "Leica AT960 MPE ±(15 µm + 6 µm/m) for a 3-D point taken as 2σ: a specification's bound, the upper end";
+const TRACKER_NOISE_SOURCE: &str = "Leica AT960 MPE ±(15 µm + 6 µm/m) for a 3-D point taken as 2σ: a \
+     specification's bound, the upper end";
 
 /// A joint's stiffness before the pilot, per newton metre of the effort limit its description declares
 /// (Nm/rad per Nm). A joint is sized for its torque, and its gear's stiffness grows with its size; by how much
