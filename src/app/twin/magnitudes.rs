@@ -162,15 +162,17 @@ pub struct Targets {
     pub repeats: Option<Repeats>,
 }
 
-/// The twin `scenario`'s statistics, over [`SEEDS`] draws: the elastic held-out means (mm) and the repeats' mean
-/// distances (m) with its probe at `probe` (flange frame).
+/// A twin's statistics over [`SEEDS`] draws: the elastic held-out means (mm) and the repeats' mean distances (m).
+pub type Statistics = (Vec<f64>, Vec<f64>);
+
+/// The twin `scenario`'s [`Statistics`], with its probe at `probe` (flange frame).
 pub fn simulate(
     scenario: &Scenario,
     probe: &Point3<f64>,
     pilot: &Dataset,
     ctx: &FitContext,
     seed: u64,
-) -> Result<(Vec<f64>, Vec<f64>)> {
+) -> Result<Statistics> {
     let mut elastic = Vec::new();
     let mut repeats = Vec::new();
     for s in 0..SEEDS {

@@ -576,17 +576,15 @@ fn fit_tracker_noise(
     seed: u64,
 ) -> Result<()> {
     let base: Vec<f64> = TRACKER_NOISE.iter().map(|k| values.magnitude(k)).collect();
-    let scaled = |v: &TwinValues, s: f64| {
-        let mut v = v.clone();
-        for (k, b) in TRACKER_NOISE.iter().zip(&base) {
-            v.set(k, b * s);
-        }
-        v
-    };
-    let fitted = magnitudes::fit_one(repeats.mean_distance_m, 1.0, |s| {
-        let v = scaled(values, s);
-        magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed).map(|r| r.1)
-    })?;
+    let fitted = fit_scale(
+        values,
+        &TRACKER_NOISE,
+        repeats.mean_distance_m,
+        |r| r.1,
+        pilot,
+        ctx,
+        seed,
+    )?;
     let spread = repeats.mean_distance_m * 1e3;
     let (s, std, source) = match fitted {
         Some((s, std)) if s < 1.0 => (
@@ -607,11 +605,38 @@ fn fit_tracker_noise(
             ),
         ),
     };
-    *values = scaled(values, s);
+    *values = scaled(values, &TRACKER_NOISE, s);
     for (k, b) in TRACKER_NOISE.iter().zip(&base) {
         set_source(values, k, std.map(|std| std * b), source.clone());
     }
     Ok(())
+}
+
+/// `values` with the magnitudes `keys` multiplied by `s`.
+fn scaled(values: &TwinValues, keys: &[&str], s: f64) -> TwinValues {
+    let mut v = values.clone();
+    for k in keys {
+        v.set(k, values.magnitude(k) * s);
+    }
+    v
+}
+
+/// The one factor on the magnitudes `keys` that brings a statistic of the twin to `target`, with its standard
+/// deviation ([`magnitudes::fit_one`] from 1): `statistic` picks the elastic held-out means or the repeats'
+/// spreads of [`magnitudes::simulate`].
+fn fit_scale(
+    values: &TwinValues,
+    keys: &[&str],
+    target: f64,
+    statistic: fn(magnitudes::Statistics) -> Vec<f64>,
+    pilot: &Dataset,
+    ctx: &FitContext,
+    seed: u64,
+) -> Result<Option<(f64, f64)>> {
+    magnitudes::fit_one(target, 1.0, |s| {
+        let v = scaled(values, keys, s);
+        magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed).map(statistic)
+    })
 }
 
 /// The error sources of smooth effect (true inertials, cable, bearing tilt) scaled by one factor in [0, 1] so
@@ -628,20 +653,17 @@ fn scale_smooth_sources(
         "truth.link_com_m",
         "truth.cable_kg_per_m",
     ];
-    let base: Vec<f64> = SMOOTH.iter().map(|k| values.magnitude(k)).collect();
-    let scaled = |v: &TwinValues, s: f64| {
-        let mut v = v.clone();
-        for (k, b) in SMOOTH.iter().zip(&base) {
-            v.set(k, b * s);
-        }
-        v
-    };
-    let fitted = magnitudes::fit_one(targets.elastic_mm, 1.0, |s| {
-        let v = scaled(values, s);
-        magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed).map(|r| r.0)
-    })?;
+    let fitted = fit_scale(
+        values,
+        &SMOOTH,
+        targets.elastic_mm,
+        |r| r.0,
+        pilot,
+        ctx,
+        seed,
+    )?;
     let s = fitted.map_or(0.0, |(s, _)| s.min(1.0));
-    *values = scaled(values, s);
+    *values = scaled(values, &SMOOTH, s);
     for k in SMOOTH {
         set_source(
             values,
