@@ -6,6 +6,7 @@
 use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
+use super::magnitudes::TRACKER_NOISE;
 use super::scenario::TwinValues;
 use crate::calib::registry::MethodKind;
 use crate::campaign::LayoutKind;
@@ -99,16 +100,98 @@ pub fn answer_range(values: &TwinValues, draws: usize) -> Result<Vec<RangeRow>> 
 }
 
 /// Draw `k` of the twin: its own seed, and each magnitude with a standard deviation drawn from it (never below
-/// zero).
+/// zero). The tracker's noise keys share one draw: one fitted factor scales them together.
 fn draw(values: &TwinValues, k: u64) -> TwinValues {
     let mut drawn = values.clone();
     drawn.seed = values.seed + DRAW_SEED_OFFSET + k;
     let mut rng = derive(drawn.seed, Stream::Perturbation, &[u64::MAX - 1]);
+    let mut tracker = None;
     for m in &mut drawn.magnitudes {
         if let Some(std) = m.std.filter(|s| s.is_finite() && *s > 0.0) {
-            let z: f64 = Normal::new(0.0, 1.0).map_or(0.0, |n| n.sample(&mut rng));
+            let mut normal = || Normal::new(0.0, 1.0).map_or(0.0, |n| n.sample(&mut rng));
+            let z: f64 = if TRACKER_NOISE.contains(&m.key.as_str()) {
+                *tracker.get_or_insert_with(normal)
+            } else {
+                normal()
+            };
             m.value = (m.value + std * z).max(0.0);
         }
     }
     drawn
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+
+    use super::*;
+    use crate::app::twin::magnitudes::Magnitude;
+    use crate::app::twin::scenario::Workspace;
+    use crate::robot::Payload;
+    use crate::truth::{KnownGeometry, Offset};
+
+    /// The tracker's noise keys come from one fitted factor: a draw moves them together, by the same factor,
+    /// and the other magnitudes by draws of their own.
+    #[test]
+    fn a_draw_moves_the_tracker_noise_keys_together() {
+        let magnitude = |key: &str, value: f64, std: f64| Magnitude {
+            key: key.into(),
+            value,
+            unit: "",
+            std: Some(std),
+            source: String::new(),
+        };
+        let values = TwinValues {
+            name: "twin".into(),
+            seed: 1,
+            robot: "robots/ur10.urdf".into(),
+            flange_link: None,
+            payload: Payload {
+                mass: 0.0,
+                com: [0.0; 3],
+            },
+            geometry: KnownGeometry {
+                base: Offset::ZERO,
+                joint_frames: vec![Offset::ZERO; 6],
+                joint_zero_rad: vec![0.0; 6],
+            },
+            stiffness: vec![1e5; 6],
+            magnitudes: vec![
+                magnitude("tracker.range_sigma_m", 8e-6, 2e-6),
+                magnitude("truth.gear_wave_amplitude_rad", 1e-4, 5e-5),
+                magnitude("tracker.range_sigma_per_m", 3e-6, 0.75e-6),
+                magnitude("tracker.angle_sigma_rad", 5e-6, 1.25e-6),
+            ],
+            tracker: Isometry3::identity(),
+            probe: Point3::origin(),
+            facing: Vector3::z(),
+            posture_deg: vec![0.0; 6],
+            workspace: Workspace {
+                center_m: [0.0; 3],
+                size_m: [0.1; 3],
+                tool: UnitQuaternion::identity(),
+                cone_half_angle_deg: 10.0,
+                spin_deg: 10.0,
+            },
+            targets_mm: vec![0.1],
+            thermal: None,
+        };
+        let mut waves = Vec::new();
+        for k in 0..8 {
+            let d = draw(&values, k);
+            let factor = d.magnitude("tracker.range_sigma_m") / 8e-6;
+            for (key, v) in [
+                ("tracker.range_sigma_per_m", 3e-6),
+                ("tracker.angle_sigma_rad", 5e-6),
+            ] {
+                assert!(
+                    (d.magnitude(key) / v - factor).abs() < 1e-12,
+                    "{key}: draw {k}"
+                );
+            }
+            waves.push(d.magnitude("truth.gear_wave_amplitude_rad") / 1e-4 - factor);
+        }
+        // The wave is drawn on its own: its factor is not the tracker's.
+        assert!(waves.iter().any(|w| w.abs() > 1e-3), "{waves:?}");
+    }
 }
