@@ -9,6 +9,27 @@ use crate::calib::method::FitContext;
 use crate::dataset::Dataset;
 use crate::error::Result;
 
+/// What every fit replays the pilot with: its configurations, the fits' context and the seed.
+#[derive(Clone, Copy)]
+struct Replays<'a> {
+    pilot: &'a Dataset,
+    ctx: &'a FitContext<'a>,
+    seed: u64,
+}
+
+impl Replays<'_> {
+    /// The twin `values`' [`magnitudes::Statistics`] on the pilot's configurations.
+    fn statistics(&self, values: &TwinValues) -> Result<magnitudes::Statistics> {
+        magnitudes::simulate(
+            &values.scenario()?,
+            &values.probe,
+            self.pilot,
+            self.ctx,
+            self.seed,
+        )
+    }
+}
+
 /// Fits the repeatability to the pilot's repeats (when it has some) and the gears' wave to the elastic fit's
 /// held-out error; when even without the wave the twin errs more than the pilot, scales the cited inertial and
 /// tilt magnitudes down instead.
@@ -19,14 +40,15 @@ pub fn magnitudes(
     targets: &Targets,
     seed: u64,
 ) -> Result<()> {
+    let replays = Replays { pilot, ctx, seed };
     if let Some(repeats) = targets.repeats {
-        fit_repeatability(values, pilot, ctx, repeats, seed)?;
+        fit_repeatability(values, replays, repeats)?;
     }
     let key = "truth.gear_wave_amplitude_rad";
     let fitted = magnitudes::fit_one(targets.elastic_mm, magnitudes::GEAR_WAVE_START, |x| {
         let mut v = values.clone();
         v.set(key, x);
-        Ok(magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed)?.0)
+        Ok(replays.statistics(&v)?.0)
     })?;
     match fitted {
         Some((x, std)) => {
@@ -52,7 +74,7 @@ pub fn magnitudes(
                     targets.elastic_mm
                 ),
             );
-            scale_smooth_sources(values, pilot, ctx, targets, seed)?;
+            scale_smooth_sources(values, replays, targets)?;
         }
     }
     Ok(())
@@ -66,13 +88,7 @@ fn set_source(values: &mut TwinValues, key: &str, std: Option<f64>, source: Stri
 }
 
 /// The repeatability that gives the pilot's spread of repeated configurations.
-fn fit_repeatability(
-    values: &mut TwinValues,
-    pilot: &Dataset,
-    ctx: &FitContext,
-    repeats: Repeats,
-    seed: u64,
-) -> Result<()> {
+fn fit_repeatability(values: &mut TwinValues, replays: Replays, repeats: Repeats) -> Result<()> {
     let key = "truth.repeatability_rad";
     let fitted = magnitudes::fit_one(
         repeats.mean_distance_m,
@@ -80,7 +96,7 @@ fn fit_repeatability(
         |x| {
             let mut v = values.clone();
             v.set(key, x);
-            Ok(magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed)?.1)
+            Ok(replays.statistics(&v)?.1)
         },
     )?;
     let (value, std, source) = match fitted {
@@ -105,7 +121,7 @@ fn fit_repeatability(
     values.set(key, value);
     set_source(values, key, std, source);
     if fitted.is_none() {
-        fit_tracker_noise(values, pilot, ctx, repeats, seed)?;
+        fit_tracker_noise(values, replays, repeats)?;
     }
     Ok(())
 }
@@ -114,22 +130,14 @@ fn fit_repeatability(
 /// them (the arm repeating exactly), the tracker is quieter than its specification, a bound taken as 2σ: its
 /// random noise, scaled by one factor in [0, 1], gives the pilot's spread. Where even no noise spreads them more
 /// (the cited lost motion, a warm-up between repeats), the specification stays and the source says so.
-fn fit_tracker_noise(
-    values: &mut TwinValues,
-    pilot: &Dataset,
-    ctx: &FitContext,
-    repeats: Repeats,
-    seed: u64,
-) -> Result<()> {
+fn fit_tracker_noise(values: &mut TwinValues, replays: Replays, repeats: Repeats) -> Result<()> {
     let base: Vec<f64> = TRACKER_NOISE.iter().map(|k| values.magnitude(k)).collect();
     let fitted = fit_scale(
         values,
         &TRACKER_NOISE,
         repeats.mean_distance_m,
         |r| r.1,
-        pilot,
-        ctx,
-        seed,
+        replays,
     )?;
     let spread = repeats.mean_distance_m * 1e3;
     let (s, std, source) = match fitted {
@@ -175,13 +183,10 @@ fn fit_scale(
     keys: &[&str],
     target: f64,
     statistic: fn(magnitudes::Statistics) -> Vec<f64>,
-    pilot: &Dataset,
-    ctx: &FitContext,
-    seed: u64,
+    replays: Replays,
 ) -> Result<Option<(f64, f64)>> {
     magnitudes::fit_one(target, 1.0, |s| {
-        let v = scaled(values, keys, s);
-        magnitudes::simulate(&v.scenario()?, &v.probe, pilot, ctx, seed).map(statistic)
+        replays.statistics(&scaled(values, keys, s)).map(statistic)
     })
 }
 
@@ -189,25 +194,15 @@ fn fit_scale(
 /// the elastic fit's held-out error meets the pilot's.
 fn scale_smooth_sources(
     values: &mut TwinValues,
-    pilot: &Dataset,
-    ctx: &FitContext,
+    replays: Replays,
     targets: &Targets,
-    seed: u64,
 ) -> Result<()> {
     const SMOOTH: [&str; 3] = [
         "truth.link_mass_spread",
         "truth.link_com_m",
         "truth.cable_kg_per_m",
     ];
-    let fitted = fit_scale(
-        values,
-        &SMOOTH,
-        targets.elastic_mm,
-        |r| r.0,
-        pilot,
-        ctx,
-        seed,
-    )?;
+    let fitted = fit_scale(values, &SMOOTH, targets.elastic_mm, |r| r.0, replays)?;
     let s = fitted.map_or(0.0, |(s, _)| s.min(1.0));
     *values = scaled(values, &SMOOTH, s);
     for k in SMOOTH {
