@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::rng::{Stream, derive};
 use crate::robot::collision::CollisionModel;
 use crate::robot::{Frames, JointRates, forward_kinematics};
-use crate::truth::{Command, MotionSample, PathPoint};
+use crate::truth::{Command, MotionSample, PathPoint, motion};
 use crate::world::World;
 
 /// The most samples a trajectory campaign keeps: the same bound as a region's point count.
@@ -181,6 +181,20 @@ impl Path {
         Path { segments }
     }
 
+    /// The largest commanded joint acceleration along the path (rad/s²), at the 41 points per segment where
+    /// [`Path::plan`] holds the accelerations to their limit.
+    pub fn peak_acceleration(&self) -> f64 {
+        self.segments
+            .iter()
+            .flat_map(|seg| {
+                (0..=40).flat_map(move |step| {
+                    let basis = Basis::at(step as f64 / 40.0);
+                    (0..seg.q0.len()).map(move |j| seg.eval_with(j, &basis).2.abs())
+                })
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// Total duration (s).
     pub fn duration(&self) -> f64 {
         self.segments.last().map_or(0.0, |s| s.start + s.duration)
@@ -249,7 +263,11 @@ pub fn measure(
     let stamps = tracker_stamps(path.duration(), config)?;
     let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
     let truth_times = arm_times(&stamps, config, &mut rng)?;
-    let moved = world.robot.follow(&path, &truth_times, Some(&mut rng))?;
+    // The integration's step from the path's accelerations: a slower path takes longer steps at the same accuracy.
+    let step = motion::step_for(path.peak_acceleration());
+    let moved = world
+        .robot
+        .follow_stepped(&path, &truth_times, step, Some(&mut rng))?;
     let recorded = record(world, planned, &path, &stamps, &moved, &mut rng);
     if recorded.campaign.points.is_empty() {
         return Err(Error::Invalid(format!(

@@ -52,6 +52,37 @@ use crate::robot::inverse_dynamics::{
 /// error, second order in the step: 3.33 ms missed by 4.8 µm, 4 ms by 5.96 µm (docs/speed.md).
 pub const MOTION_STEP_S: f64 = 2e-3;
 
+/// The largest commanded joint acceleration (rad/s²) of the move [`MOTION_STEP_S`] was measured on:
+/// `tests/motion.rs`'s, at full speed under the default study's limit of 5 rad/s².
+pub const STEP_ACCELERATION_RAD_S2: f64 = 5.0;
+
+/// The longest step for a path whose commanded joint accelerations reach `peak` (rad/s²) at most:
+/// [`MOTION_STEP_S`] × √2 for each halving of the acceleration below [`STEP_ACCELERATION_RAD_S2`] (at most
+/// two: 4 ms), ÷ √2 for each doubling above it (at most four: 0.5 ms); a path within (½, 1] of it takes
+/// [`MOTION_STEP_S`] itself, whose nodes were measured.
+///
+/// The trapezoidal rule's error is second order in the step and grows with the dynamic deflection it
+/// integrates, which the accelerations drive: h²·peak held at most at its measured value holds the error near
+/// the measured one. Measured in `tests/motion.rs` (the flange against the f64 Runge–Kutta, docs/speed.md):
+///
+/// | move | 2 ms | this rule |
+/// |---|---:|---:|
+/// | a quarter of the acceleration (speed 0.25) | 0.13 µm | 0.42 µm (4 ms) |
+/// | half (speed 0.5) | 0.64 µm | 1.14 µm (2.83 ms) |
+/// | full speed | 1.71 µm | 1.71 µm (2 ms) |
+/// | twice (10 rad/s²) | 5.29 µm | 3.38 µm (1.41 ms) |
+///
+/// Above the measured acceleration the error grows faster than the rule assumes (the linearisation about the
+/// quasi-static state misses more of a larger dynamic deflection), so the halved steps there hold it within the
+/// 5 µm bound, not at 1.71 µm.
+pub fn step_for(peak: f64) -> f64 {
+    let halvings = (STEP_ACCELERATION_RAD_S2 / peak).log2().floor();
+    if halvings.is_nan() {
+        return MOTION_STEP_S;
+    }
+    MOTION_STEP_S * 2f64.powf(halvings.clamp(-4.0, 2.0) / 2.0)
+}
+
 /// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`] runs on the grid k · KNOT_S
 /// of path time and at every sample; the integration's nodes between take δ_s from the cubic through the four
 /// nearest grid solves. Within a path's quintic segment the command's acceleration is a cubic in time and δ_s
