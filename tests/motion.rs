@@ -124,7 +124,7 @@ fn compare(speed: f64) -> Comparison {
 }
 
 /// [`compare`] under the acceleration limit `amax` (rad/s²), the fast path at the integration step `step` (the
-/// one [`motion::step_for`] gives the path when `None`), against rapier as well when `rapier`.
+/// one [`motion::Resolution::for_peak_acceleration`] gives the path when `None`), against rapier as well when `rapier`.
 fn compare_at(amax: f64, speed: f64, step: Option<f64>, rapier: bool) -> Comparison {
     let s = Scenario::parse(IDEAL_ELASTIC, "ideal_elastic.toml").unwrap();
     let world = calibench::app::world(&s).unwrap();
@@ -143,8 +143,14 @@ fn compare_at(amax: f64, speed: f64, step: Option<f64>, rapier: bool) -> Compari
         .take_while(|t| *t <= path.duration() + 0.3)
         .collect();
     let at = |t: f64| path.at(t);
-    let step = step.unwrap_or_else(|| motion::step_for(path.peak_acceleration()));
-    let fast = robot.follow_stepped(&at, &times, step, None).unwrap();
+    let resolution = match step {
+        Some(step_s) => motion::Resolution {
+            step_s,
+            knot_s: motion::KNOT_S,
+        },
+        None => motion::Resolution::for_peak_acceleration(path.peak_acceleration()),
+    };
+    let fast = robot.follow_stepped(&at, &times, resolution, None).unwrap();
     let n = world.nominal.dof();
     let rest_at = |t: f64| {
         let mut q0 = vec![0.0; n];
@@ -217,7 +223,7 @@ fn the_fast_path_agrees_with_rapier_in_motion() {
     assert!(c.quasi_static > 100e-6, "{} µm", c.quasi_static * 1e6);
 }
 
-/// A slower path takes a longer integration step ([`motion::step_for`]: 2.83 ms at half the acceleration, 4 ms
+/// A slower path takes a longer integration step and grid ([`motion::Resolution::for_peak_acceleration`]: 2.83 ms at half the acceleration, 4 ms
 /// at a quarter) and a faster one a shorter step, each within what the fast path misses at full speed with the
 /// step that was measured there, or within the 5 µm bound where the acceleration is beyond the measured one
 /// (at 10 rad/s², 2 ms misses by more than the bound).
@@ -243,8 +249,10 @@ fn the_step_follows_the_acceleration_at_the_full_speed_accuracy() {
         "{}",
         lines.join("; ")
     );
-    assert_eq!(motion::step_for(4.99), motion::MOTION_STEP_S);
-    assert!(motion::step_for(2.49) > 1.4 * motion::MOTION_STEP_S);
-    assert_eq!(motion::step_for(0.86), 2.0 * motion::MOTION_STEP_S);
-    assert!(motion::step_for(9.98) < 0.71 * motion::MOTION_STEP_S);
+    let at = motion::Resolution::for_peak_acceleration;
+    assert_eq!(at(4.99), motion::Resolution::MEASURED);
+    assert!(at(2.49).step_s > 1.4 * motion::MOTION_STEP_S);
+    assert_eq!(at(0.86).step_s, 2.0 * motion::MOTION_STEP_S);
+    assert_eq!(at(0.86).knot_s, 2.0 * motion::KNOT_S);
+    assert!(at(9.98).step_s < 0.71 * motion::MOTION_STEP_S);
 }

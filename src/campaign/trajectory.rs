@@ -263,11 +263,11 @@ pub fn measure(
     let stamps = tracker_stamps(path.duration(), config)?;
     let mut rng = derive(seed, Stream::Measurement, &[u64::MAX, 0]);
     let truth_times = arm_times(&stamps, config, &mut rng)?;
-    // The integration's step from the path's accelerations: a slower path takes longer steps at the same accuracy.
-    let step = motion::step_for(path.peak_acceleration());
+    // The walk's resolution from the path's accelerations: a slower path takes longer steps at the same accuracy.
+    let resolution = motion::Resolution::for_peak_acceleration(path.peak_acceleration());
     let moved = world
         .robot
-        .follow_stepped(&path, &truth_times, step, Some(&mut rng))?;
+        .follow_stepped(&path, &truth_times, resolution, Some(&mut rng))?;
     let recorded = record(world, planned, &path, &stamps, &moved, &mut rng);
     if recorded.campaign.points.is_empty() {
         return Err(Error::Invalid(format!(

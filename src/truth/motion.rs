@@ -23,7 +23,8 @@
 //! one lags and rings about it. That system is integrated by the trapezoidal rule (Newmark's average
 //! acceleration: no numerical damping, second order) at steps of at most [`MOTION_STEP_S`], with M, A and B
 //! computed every [`RELINEARIZE_S`] of path and interpolated between, and δ_s solved every [`KNOT_S`] and at each
-//! sample, interpolated by a cubic between where it is smooth. The rapier f64 multibody ([`super::physics_motion`]) integrates
+//! sample, interpolated by a cubic between where it is smooth; a slower path takes all three longer in
+//! proportion to its own time scale ([`Resolution::for_peak_acceleration`]). The rapier f64 multibody ([`super::physics_motion`]) integrates
 //! the full nonlinear model; `tests/motion.rs` holds the two together to 5 µm at the flange.
 //!
 //! The controller logs its motor encoders: the motor angle it reads back is the command it tracked, so a servo
@@ -56,31 +57,56 @@ pub const MOTION_STEP_S: f64 = 2e-3;
 /// `tests/motion.rs`'s, at full speed under the default study's limit of 5 rad/s².
 pub const STEP_ACCELERATION_RAD_S2: f64 = 5.0;
 
-/// The longest step for a path whose commanded joint accelerations reach `peak` (rad/s²) at most:
-/// [`MOTION_STEP_S`] × √2 for each halving of the acceleration below [`STEP_ACCELERATION_RAD_S2`] (at most
-/// two: 4 ms), ÷ √2 for each doubling above it (at most four: 0.5 ms); a path within (½, 1] of it takes
-/// [`MOTION_STEP_S`] itself, whose nodes were measured.
-///
-/// The trapezoidal rule's error is second order in the step and grows with the dynamic deflection it
-/// integrates, which the accelerations drive: h²·peak held at most at its measured value holds the error near
-/// the measured one. Measured in `tests/motion.rs` (the flange against the f64 Runge–Kutta, docs/speed.md):
-///
-/// | move | 2 ms | this rule |
-/// |---|---:|---:|
-/// | a quarter of the acceleration (speed 0.25) | 0.13 µm | 0.42 µm (4 ms) |
-/// | half (speed 0.5) | 0.64 µm | 1.14 µm (2.83 ms) |
-/// | full speed | 1.71 µm | 1.71 µm (2 ms) |
-/// | twice (10 rad/s²) | 5.29 µm | 3.38 µm (1.41 ms) |
-///
-/// Above the measured acceleration the error grows faster than the rule assumes (the linearisation about the
-/// quasi-static state misses more of a larger dynamic deflection), so the halved steps there hold it within the
-/// 5 µm bound, not at 1.71 µm.
-pub fn step_for(peak: f64) -> f64 {
-    let halvings = (STEP_ACCELERATION_RAD_S2 / peak).log2().floor();
-    if halvings.is_nan() {
-        return MOTION_STEP_S;
+/// The walk's resolution in path time: the integration's longest step and the spacing of the grid's exact
+/// quasi-static solves (the linearisations every [`RELINEARIZE_KNOTS`] of them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Resolution {
+    pub step_s: f64,
+    pub knot_s: f64,
+}
+
+impl Resolution {
+    /// [`MOTION_STEP_S`] and [`KNOT_S`], as measured.
+    pub const MEASURED: Resolution = Resolution {
+        step_s: MOTION_STEP_S,
+        knot_s: KNOT_S,
+    };
+
+    /// For a path whose commanded joint accelerations reach `peak` (rad/s²) at most: [`Resolution::MEASURED`]
+    /// × √2 for each halving of the acceleration below [`STEP_ACCELERATION_RAD_S2`] (at most two: a 4 ms step),
+    /// ÷ √2 for each doubling above it (at most four: 0.5 ms); a path within (½, 1] of it takes the measured
+    /// resolution itself.
+    ///
+    /// Why √2: under the joints' velocity and acceleration limits scaled alike, a path k times slower in time
+    /// has accelerations k² times smaller (velocity-bound legs) or is k² times longer in the acceleration
+    /// limit's units (acceleration-bound ones): time runs √(5 rad/s² / peak) times slower along it. The grid
+    /// of quasi-static solves follows the path's own time scale (δ_s is the path's torque through the springs;
+    /// the gear's wave too moves with the joints' rates). The integration's error is second order in the step
+    /// and grows with the dynamic deflection the accelerations drive, so h²·peak held at most at its measured
+    /// value holds it near the measured one. Measured in `tests/motion.rs` (the flange against the f64
+    /// Runge–Kutta, docs/speed.md):
+    ///
+    /// | move | measured resolution | this one |
+    /// |---|---:|---:|
+    /// | a quarter of the acceleration (speed 0.25) | 0.13 µm | 0.41 µm (4 ms, 20 ms) |
+    /// | half (speed 0.5) | 0.64 µm | 1.17 µm (2.83 ms, 14.1 ms) |
+    /// | full speed | 1.71 µm | 1.71 µm (2 ms, 10 ms) |
+    /// | twice (10 rad/s²) | 5.29 µm | 2.75 µm (1.41 ms, 7.1 ms) |
+    ///
+    /// Above the measured acceleration the error grows faster than the rule assumes (the linearisation about
+    /// the quasi-static state misses more of a larger dynamic deflection), so the shorter steps there hold it
+    /// within the 5 µm bound, not at 1.71 µm.
+    pub fn for_peak_acceleration(peak: f64) -> Resolution {
+        let halvings = (STEP_ACCELERATION_RAD_S2 / peak).log2().floor();
+        if halvings.is_nan() {
+            return Resolution::MEASURED;
+        }
+        let dilation = 2f64.powf(halvings.clamp(-4.0, 2.0) / 2.0);
+        Resolution {
+            step_s: MOTION_STEP_S * dilation,
+            knot_s: KNOT_S * dilation,
+        }
     }
-    MOTION_STEP_S * 2f64.powf(halvings.clamp(-4.0, 2.0) / 2.0)
 }
 
 /// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`] runs on the grid k · KNOT_S
@@ -198,20 +224,21 @@ impl TrueRobot {
         times: &[f64],
         noise: Option<&mut ChaCha8Rng>,
     ) -> Result<Vec<MotionSample>> {
-        self.follow_stepped(path, times, MOTION_STEP_S, noise)
+        self.follow_stepped(path, times, Resolution::MEASURED, noise)
     }
 
-    /// [`TrueRobot::follow`] with the integration's longest step `step_s` (s).
+    /// [`TrueRobot::follow`] at `resolution`.
     pub fn follow_stepped(
         &self,
         path: &dyn Command,
         times: &[f64],
-        step_s: f64,
+        resolution: Resolution,
         mut noise: Option<&mut ChaCha8Rng>,
     ) -> Result<Vec<MotionSample>> {
-        if !(step_s.is_finite() && step_s > 0.0) {
+        let Resolution { step_s, knot_s } = resolution;
+        if !(step_s.is_finite() && step_s > 0.0 && knot_s.is_finite() && knot_s > 0.0) {
             return Err(Error::Invalid(format!(
-                "motion: integration step {step_s} s must be positive"
+                "motion: integration step {step_s} s and grid spacing {knot_s} s must be positive"
             )));
         }
         if let Some(t) = times.iter().find(|t| !t.is_finite()) {
@@ -222,7 +249,7 @@ impl TrueRobot {
         let mut order: Vec<usize> = (0..times.len()).collect();
         order.sort_by(|&a, &b| times[a].total_cmp(&times[b]));
         let damping = self.transmission_damping();
-        let mut walk = Walk::new(self, path, &damping);
+        let mut walk = Walk::new(self, path, &damping, knot_s);
         let mut reached: Vec<Option<Reached>> = (0..times.len()).map(|_| None).collect();
         let mut last: Option<f64> = None;
         for &i in &order {
@@ -339,6 +366,8 @@ impl TrueRobot {
 /// The walk along the path, node by node in time order.
 struct Walk<'a> {
     robot: &'a TrueRobot,
+    /// The spacing of the grid's exact quasi-static solves (s).
+    knot_s: f64,
     path: &'a dyn Command,
     damping: &'a [f64],
     /// The quasi-static solve at the last node solved exactly.
@@ -397,7 +426,12 @@ fn turn(visit: &mut Visit, qd: &[f64]) {
 }
 
 impl Walk<'_> {
-    fn new<'a>(robot: &'a TrueRobot, path: &'a dyn Command, damping: &'a [f64]) -> Walk<'a> {
+    fn new<'a>(
+        robot: &'a TrueRobot,
+        path: &'a dyn Command,
+        damping: &'a [f64],
+        knot_s: f64,
+    ) -> Walk<'a> {
         let n = robot.chain.dof();
         let visit = || Visit {
             direction: vec![1.0; n],
@@ -406,6 +440,7 @@ impl Walk<'_> {
         let zeros = || DMatrix::zeros(n, n);
         Walk {
             robot,
+            knot_s,
             path,
             damping,
             state: TrueState::new(robot),
@@ -444,7 +479,7 @@ impl Walk<'_> {
         let mut p = std::mem::take(&mut self.point);
         command(self.path, n, t, &mut p)?;
         turn(&mut self.visit, &p.qd);
-        let here = (t / KNOT_S).floor() as i64;
+        let here = (t / self.knot_s).floor() as i64;
         self.solve_through(here)?;
         let smooth = self.interpolate(t, here, &p.qdd);
         if exact || !smooth {
@@ -508,7 +543,7 @@ impl Walk<'_> {
     fn solve_knot(&mut self, index: i64) -> Result<()> {
         let robot = self.robot;
         let n = robot.chain.dof();
-        let t = index as f64 * KNOT_S;
+        let t = index as f64 * self.knot_s;
         let grid = &mut self.grid;
         command(self.path, n, t, &mut grid.point)?;
         let p = &grid.point;
@@ -574,7 +609,7 @@ impl Walk<'_> {
     /// direction, load each spring on the same segment of its curve, and the same cubic gives the command's
     /// accelerations `qdd` at the node.
     fn interpolate(&mut self, t: f64, here: i64, qdd: &[f64]) -> bool {
-        let u = t / KNOT_S - here as f64;
+        let u = t / self.knot_s - here as f64;
         // Lagrange's weights on the knots at −1, 0, 1, 2.
         let weights = [
             -u * (u - 1.0) * (u - 2.0) / 6.0,
@@ -605,7 +640,7 @@ impl Walk<'_> {
     /// The grid's linearisations about `t`, interpolated linearly in time.
     fn interpolate_linear(&mut self, t: f64) {
         let [(ia, a), (ib, b)] = [&self.grid.linear[0], &self.grid.linear[1]];
-        let w = (t / KNOT_S - *ia as f64) / (ib - ia) as f64;
+        let w = (t / self.knot_s - *ia as f64) / (ib - ia) as f64;
         for (out, (a, b)) in [
             (&mut self.linear.m, (&a.m, &b.m)),
             (&mut self.linear.c, (&a.c, &b.c)),
