@@ -5,6 +5,7 @@ pub mod motion;
 pub mod perturbation;
 pub mod physics;
 pub mod physics_motion;
+pub mod resolution;
 pub mod robot;
 pub mod stiffness;
 pub mod thermal;
