@@ -124,7 +124,8 @@ fn compare(speed: f64) -> Comparison {
 }
 
 /// [`compare`] under the acceleration limit `amax` (rad/s²), the fast path at the integration step `step` (the
-/// one [`motion::Resolution::for_peak_acceleration`] gives the path when `None`), against rapier as well when `rapier`.
+/// one [`motion::Resolution::for_peak_acceleration`] gives the path, with its grid, when `None`), against rapier
+/// as well when `rapier`.
 fn compare_at(amax: f64, speed: f64, step: Option<f64>, rapier: bool) -> Comparison {
     let s = Scenario::parse(IDEAL_ELASTIC, "ideal_elastic.toml").unwrap();
     let world = calibench::app::world(&s).unwrap();
@@ -223,10 +224,10 @@ fn the_fast_path_agrees_with_rapier_in_motion() {
     assert!(c.quasi_static > 100e-6, "{} µm", c.quasi_static * 1e6);
 }
 
-/// A slower path takes a longer integration step and grid ([`motion::Resolution::for_peak_acceleration`]: 2.83 ms at half the acceleration, 4 ms
-/// at a quarter) and a faster one a shorter step, each within what the fast path misses at full speed with the
-/// step that was measured there, or within the 5 µm bound where the acceleration is beyond the measured one
-/// (at 10 rad/s², 2 ms misses by more than the bound).
+/// A slower path takes a longer integration step and grid ([`motion::Resolution::for_peak_acceleration`]: 2.83
+/// ms at half the acceleration, 4 ms at a quarter) and a faster one shorter ones, each within what the fast path
+/// misses at full speed with the resolution that was measured there, or within the 5 µm bound where the
+/// acceleration is beyond the measured one (at 10 rad/s², 2 ms misses by more than the bound).
 #[test]
 fn the_step_follows_the_acceleration_at_the_full_speed_accuracy() {
     let full = compare_at(5.0, 1.0, None, false).against_f64;

@@ -24,8 +24,9 @@
 //! acceleration: no numerical damping, second order) at steps of at most [`MOTION_STEP_S`], with M, A and B
 //! computed every [`RELINEARIZE_S`] of path and interpolated between, and δ_s solved every [`KNOT_S`] and at each
 //! sample, interpolated by a cubic between where it is smooth; a slower path takes all three longer in
-//! proportion to its own time scale ([`Resolution::for_peak_acceleration`]). The rapier f64 multibody ([`super::physics_motion`]) integrates
-//! the full nonlinear model; `tests/motion.rs` holds the two together to 5 µm at the flange.
+//! proportion to its own time scale ([`Resolution::for_peak_acceleration`]). The rapier f64 multibody
+//! ([`super::physics_motion`]) integrates the full nonlinear model; `tests/motion.rs` holds the two together to
+//! 5 µm at the flange.
 //!
 //! The controller logs its motor encoders: the motor angle it reads back is the command it tracked, so a servo
 //! lag between command and motor does not enter a (logged angles, measured point) pair; the clock offset between

@@ -34,9 +34,9 @@ impl Resolution {
     /// ÷ √2 for each doubling above it (at most four: 0.5 ms); a path within (½, 1] of it takes the measured
     /// resolution itself.
     ///
-    /// Why √2: under the joints' velocity and acceleration limits scaled alike, a path k times slower in time
-    /// has accelerations k² times smaller (velocity-bound legs) or is k² times longer in the acceleration
-    /// limit's units (acceleration-bound ones): time runs √(5 rad/s² / peak) times slower along it. The grid
+    /// Why √2: under the joints' velocity and acceleration limits scaled alike, a path whose accelerations are k²
+    /// times smaller runs k times slower in time, whether its legs are bound by the velocity limits (k times
+    /// slower rates) or by the acceleration limit: time runs √(5 rad/s² / peak) times slower along it. The grid
     /// of quasi-static solves follows the path's own time scale (δ_s is the path's torque through the springs;
     /// the gear's wave too moves with the joints' rates). The integration's error is second order in the step
     /// and grows with the dynamic deflection the accelerations drive, so h²·peak held at most at its measured
@@ -66,13 +66,17 @@ impl Resolution {
     }
 }
 
-/// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`](super::robot::TrueRobot::deflect_moving) runs on the grid k · KNOT_S
+/// The spacing of the exact quasi-static solves (s): [`TrueRobot::deflect_moving`] runs on the grid k · KNOT_S
 /// of path time and at every sample; the integration's nodes between take δ_s from the cubic through the four
 /// nearest grid solves. Within a path's quintic segment the command's acceleration is a cubic in time and δ_s
 /// (the inverse-dynamics torque through the springs) is smooth; where it is not, the nodes solve exactly: the
-/// command's accelerations miss the same cubic by more than [`ACCELERATION_TOL`](super::motion::ACCELERATION_TOL) (a waypoint, where the jerk
+/// command's accelerations miss the same cubic by more than [`ACCELERATION_TOL`] (a waypoint, where the jerk
 /// jumps, or the path's ends), a joint reverses (lost motion moves θ and the torque with it) or a spring's torque
-/// changes segment of its soft-zone curve between the four solves. Measured (see docs/speed.md): the cubic misses
+/// changes segment of its soft-zone curve between the four solves.
+///
+/// [`TrueRobot::deflect_moving`]: super::robot::TrueRobot::deflect_moving
+/// [`ACCELERATION_TOL`]: super::motion::ACCELERATION_TOL
+/// Measured (see docs/speed.md): the cubic misses
 /// the exact δ_s by 1.4e-9 rad at most along `tests/motion.rs`'s move, 2.3e-7 rad along a full-speed path of the
 /// default scenario (its gear's wave at 160 and 320 cycles a turn, faster than the grid); 20 ms knots gave
 /// 2.2e-8 and 3.6e-7 rad for no less work (more nodes fall back to exact solves).
