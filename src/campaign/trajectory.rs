@@ -95,6 +95,10 @@ impl Segment {
     }
 }
 
+/// How many equal parts of each segment [`Path::plan`] checks the velocity and acceleration limits at the ends
+/// of (and [`Path::peak_acceleration`] reads the accelerations at).
+const CHECKS_PER_SEGMENT: usize = 40;
+
 /// A timed joint-space path through waypoints.
 #[derive(Clone, Debug)]
 pub struct Path {
@@ -129,8 +133,8 @@ impl Path {
             let mut stretched = false;
             for (k, seg) in path.segments.iter().enumerate() {
                 let mut ratio: f64 = 1.0;
-                for step in 0..=40 {
-                    let s = step as f64 / 40.0;
+                for step in 0..=CHECKS_PER_SEGMENT {
+                    let s = step as f64 / CHECKS_PER_SEGMENT as f64;
                     for (j, vl) in vlim.iter().enumerate() {
                         let (_, v, a) = seg.eval(j, s);
                         ratio = ratio.max(v.abs() / vl).max((a.abs() / alim).sqrt());
@@ -181,14 +185,14 @@ impl Path {
         Path { segments }
     }
 
-    /// The largest commanded joint acceleration along the path (rad/s²), at the 41 points per segment where
-    /// [`Path::plan`] holds the accelerations to their limit.
+    /// The largest commanded joint acceleration along the path (rad/s²), at the points of each segment where
+    /// [`Path::plan`] holds the accelerations to their limit ([`CHECKS_PER_SEGMENT`]).
     pub fn peak_acceleration(&self) -> f64 {
         self.segments
             .iter()
             .flat_map(|seg| {
-                (0..=40).flat_map(move |step| {
-                    let basis = Basis::at(step as f64 / 40.0);
+                (0..=CHECKS_PER_SEGMENT).flat_map(move |step| {
+                    let basis = Basis::at(step as f64 / CHECKS_PER_SEGMENT as f64);
                     (0..seg.q0.len()).map(move |j| seg.eval_with(j, &basis).2.abs())
                 })
             })
